@@ -1,0 +1,44 @@
+"""Exceptions and warnings raised by skpcd.
+
+Every problem with a file on disk raises :class:`PointCloudFileError` (a
+:class:`ValueError`) or its subclass :class:`MissingFileError` (also a
+:class:`FileNotFoundError`), and the message always starts with the path.
+"""
+
+__all__ = ["MissingFileError", "NonFiniteWarning", "PointCloudFileError"]
+
+
+class PointCloudFileError(ValueError):
+    """A point-cloud or labels file cannot be read as asked.
+
+    Raised for unknown extensions, empty files, files without a valid point,
+    wrong column counts, truncated or corrupt binary data and headers that
+    disagree with the data.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file at fault. It is kept as the ``path`` attribute.
+    problem : str
+        What is wrong with it, in words.
+    """
+
+    def __init__(self, path, problem):
+        self.path = str(path)
+        self.problem = problem
+        super().__init__(f"{self.path}: {problem}")
+
+    def __reduce__(self):
+        return (type(self), (self.path, self.problem))
+
+
+class MissingFileError(PointCloudFileError, FileNotFoundError):
+    """A file that was asked for, or named in a labels file, does not exist.
+
+    It is both a :class:`PointCloudFileError` and a
+    :class:`FileNotFoundError`, so either ``except`` clause catches it.
+    """
+
+
+class NonFiniteWarning(UserWarning):
+    """Points with NaN or infinite coordinates were dropped while reading."""

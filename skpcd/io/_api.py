@@ -1,0 +1,382 @@
+"""Reading and writing point clouds: the format-independent front end.
+
+Each format lives in its own module (``_text``, ``_npy``, ``_ply``, ``_pcd``,
+``_las``) with two functions: ``read(path) -> (fields, info)``, where
+``fields`` maps a field name to an array of shape ``(n,)`` or ``(n, c)`` in
+file order, and ``write(path, fields, *, encoding)``. This module picks the
+format from the extension, assembles xyz and the requested extra fields, and
+applies the policy for non-finite coordinates.
+"""
+
+import csv
+import glob
+import importlib
+import os
+import re
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from skpcd.exceptions import MissingFileError, NonFiniteWarning, PointCloudFileError
+from skpcd.utils._progress import progress
+
+__all__ = [
+    "SUPPORTED_EXTENSIONS",
+    "read_point_cloud",
+    "read_segments",
+    "write_point_cloud",
+]
+
+_FORMATS = {
+    ".xyz": "_text",
+    ".txt": "_text",
+    ".pts": "_text",
+    ".csv": "_text",
+    ".npy": "_npy",
+    ".ply": "_ply",
+    ".pcd": "_pcd",
+    ".las": "_las",
+    ".laz": "_las",
+}
+SUPPORTED_EXTENSIONS = tuple(_FORMATS)
+
+# Names under which the same quantity appears in different formats.
+_ALIASES = {
+    "normals": (("normal_x", "normal_y", "normal_z"), ("nx", "ny", "nz")),
+    "colors": (("red", "green", "blue"), ("r", "g", "b")),
+}
+
+
+def _format_module(path):
+    suffix = Path(path).suffix.lower()
+    if suffix not in _FORMATS:
+        raise PointCloudFileError(
+            path,
+            f"unknown point-cloud extension {suffix or '(none)'!r}; supported: "
+            + ", ".join(SUPPORTED_EXTENSIONS),
+        )
+    return importlib.import_module(f"skpcd.io.{_FORMATS[suffix]}")
+
+
+def _pick(fields, name, path):
+    """One requested field, with format aliases resolved."""
+    if name in fields:
+        return np.asarray(fields[name])
+    for group in _ALIASES.get(name, ()):
+        if all(g in fields for g in group):
+            return np.column_stack([fields[g] for g in group])
+    available = [n for n in fields if n not in ("x", "y", "z")]
+    available += [
+        a
+        for a, groups in _ALIASES.items()
+        if any(all(g in fields for g in grp) for grp in groups)
+    ]
+    raise PointCloudFileError(
+        path,
+        f"no field {name!r}; the file has: {', '.join(available) or 'x, y, z only'}.",
+    )
+
+
+def read_point_cloud(path, *, fields=None, nonfinite="drop"):
+    """Read one point cloud from a file.
+
+    Read more in the :ref:`User Guide <io>`.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file. Its extension selects the format: ``.xyz``, ``.txt``,
+        ``.pts``, ``.csv`` (text), ``.npy``, ``.ply`` (ascii, binary little or
+        big endian), ``.pcd`` (ascii, binary, binary_compressed) and
+        ``.las``/``.laz`` (needs the ``las`` extra: ``pip install
+        skpcd[las]``).
+    fields : None, "all" or list of str, default=None
+        Extra per-point fields to return besides xyz, by their name in the
+        file (``"intensity"``, ``"classification"``...). ``"normals"`` and
+        ``"colors"`` collect the three components under any of their usual
+        names (``normal_x``/``nx``...). ``"all"`` returns every field other
+        than x, y, z. With None only the points are returned.
+    nonfinite : {"drop", "keep", "raise"}, default="drop"
+        What to do with points whose x, y or z is NaN or infinite (for
+        example the invalid points of an organized PCD): drop them with a
+        :class:`~skpcd.exceptions.NonFiniteWarning` that counts them, keep
+        them (organized clouds then keep their ``height x width`` layout,
+        row-major), or raise. When no finite point remains, "drop" raises.
+
+    Returns
+    -------
+    points : ndarray of shape (n_points, 3), dtype float64
+        The coordinates.
+    extras : dict of str to ndarray
+        Only when ``fields`` is given: each requested field, with the same
+        points removed as from ``points``.
+
+    Raises
+    ------
+    MissingFileError
+        If the file does not exist.
+    PointCloudFileError
+        For an unknown extension, an empty or corrupt file, a wrong column
+        count, a header that disagrees with the data, a missing field, or a
+        file without a valid point.
+
+    See Also
+    --------
+    write_point_cloud : The reverse.
+    read_segments : Read a folder of per-object files with their labels.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os
+    >>> from skpcd.io import read_point_cloud, write_point_cloud
+    >>> path = os.path.join(tempfile.mkdtemp(), "cloud.ply")
+    >>> write_point_cloud(path, np.eye(3), fields={"intensity": [1.0, 2.0, 3.0]})
+    >>> points, extras = read_point_cloud(path, fields=["intensity"])
+    >>> points.shape, extras["intensity"].tolist()
+    ((3, 3), [1.0, 2.0, 3.0])
+    """
+    if nonfinite not in ("drop", "keep", "raise"):
+        raise ValueError(
+            f"nonfinite must be 'drop', 'keep' or 'raise', got {nonfinite!r}"
+        )
+    path = Path(os.fspath(path))
+    module = _format_module(path)
+    if not path.is_file():
+        what = "is a directory, not a file" if path.is_dir() else "no such file"
+        raise MissingFileError(path, what)
+    if path.stat().st_size == 0:
+        raise PointCloudFileError(path, "the file is empty (0 bytes).")
+    data, _ = module.read(path)
+    for c in "xyz":
+        if c not in data:
+            raise PointCloudFileError(path, f"the file has no {c!r} field.")
+    points = np.column_stack([np.asarray(data[c], dtype=np.float64) for c in "xyz"])
+    if fields is None:
+        wanted = []
+    elif fields == "all":
+        wanted = [n for n in data if n not in ("x", "y", "z")]
+    elif isinstance(fields, str):
+        wanted = [fields]
+    else:
+        wanted = list(fields)
+    extras = {name: _pick(data, name, path) for name in wanted}
+    if len(points) == 0:
+        raise PointCloudFileError(path, "the file declares no points.")
+    finite = np.isfinite(points).all(axis=1)
+    n_bad = int(len(points) - finite.sum())
+    if n_bad and nonfinite != "keep":
+        if nonfinite == "raise":
+            raise PointCloudFileError(
+                path,
+                f"{n_bad} of {len(points)} points have NaN or infinite coordinates.",
+            )
+        if n_bad == len(points):
+            raise PointCloudFileError(
+                path, f"no valid point: all {n_bad} points are NaN or infinite."
+            )
+        warnings.warn(
+            f"{path}: dropped {n_bad} of {len(points)} points with NaN or infinite "
+            "coordinates (nonfinite='keep' keeps them).",
+            NonFiniteWarning,
+            stacklevel=2,
+        )
+        points = points[finite]
+        extras = {name: values[finite] for name, values in extras.items()}
+    if fields is None:
+        return points
+    return points, extras
+
+
+def write_point_cloud(path, points, *, fields=None, encoding=None, overwrite=False):
+    """Write one point cloud to a file.
+
+    Read more in the :ref:`User Guide <io>`.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Destination; its extension selects the format (see
+        :func:`read_point_cloud`).
+    points : array-like of shape (n_points, 3)
+        The coordinates. Written as float64 except in ``.pcd`` and ``.ply``,
+        which store float32 unless the values need float64 to round-trip.
+    fields : dict of str to array-like, default=None
+        Extra per-point fields: arrays of shape ``(n_points,)`` or
+        ``(n_points, c)``. ``"normals"`` is written under the format's usual
+        names (``normal_x``... in PCD, ``nx``... in PLY).
+    encoding : str, default=None
+        ``"ascii"``, ``"binary"`` or, for PCD, ``"binary_compressed"``; for PLY
+        also ``"binary_big_endian"``. None picks the format's default: binary
+        for PLY, PCD and NPY, ascii for text.
+    overwrite : bool, default=False
+        Replace an existing file. Without it an existing file is never
+        touched and :class:`FileExistsError` is raised.
+
+    Raises
+    ------
+    FileExistsError
+        If the file exists and ``overwrite`` is False.
+    PointCloudFileError
+        For an unknown extension.
+    ValueError
+        If the arrays have the wrong shape or lengths.
+
+    See Also
+    --------
+    read_point_cloud : The reverse.
+    """
+    path = Path(os.fspath(path))
+    module = _format_module(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(
+            f"{path}: the file exists; pass overwrite=True to replace it."
+        )
+    points = np.asarray(points)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"points must have shape (n_points, 3), got {points.shape}.")
+    out = {c: points[:, j] for j, c in enumerate("xyz")}
+    for name, values in (fields or {}).items():
+        values = np.asarray(values)
+        if values.ndim not in (1, 2) or len(values) != len(points):
+            raise ValueError(
+                f"field {name!r} must have shape (n_points,) or (n_points, c) with "
+                f"n_points={len(points)}, got {values.shape}."
+            )
+        if name in ("x", "y", "z"):
+            raise ValueError(f"field {name!r} clashes with the coordinates.")
+        out[name] = values
+    kwargs = {} if encoding is None else {"encoding": encoding}
+    module.write(path, out, **kwargs)
+
+
+def _natural_key(name):
+    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", name)]
+
+
+def _list_files(folder_or_glob, labels_path):
+    source = os.fspath(folder_or_glob)
+    if os.path.isdir(source):
+        files = [
+            p
+            for p in Path(source).iterdir()
+            if p.is_file() and p.suffix.lower() in _FORMATS and p.name != "labels.csv"
+        ]
+        root = Path(source)
+    else:
+        files = [
+            Path(p) for p in glob.glob(source, recursive=True) if os.path.isfile(p)
+        ]
+        if not files and not glob.has_magic(source):
+            raise MissingFileError(source, "no such file or folder")
+        root = (
+            Path(os.path.commonpath([str(p.parent) for p in files])) if files else None
+        )
+    if labels_path is not None:
+        files = [p for p in files if p.resolve() != Path(labels_path).resolve()]
+    if not files:
+        raise PointCloudFileError(
+            source,
+            "no point-cloud file found (extensions: "
+            + ", ".join(SUPPORTED_EXTENSIONS)
+            + ").",
+        )
+    names = [p.relative_to(root).as_posix() for p in files]
+    order = sorted(range(len(files)), key=lambda i: _natural_key(names[i]))
+    return [files[i] for i in order], [names[i] for i in order]
+
+
+def _read_labels(path):
+    path = Path(os.fspath(path))
+    if not path.is_file():
+        raise MissingFileError(path, "labels file not found")
+    with open(path, newline="", encoding="utf-8") as fh:
+        rows = [row for row in csv.reader(fh) if row and any(c.strip() for c in row)]
+    if not rows:
+        raise PointCloudFileError(path, "the labels file is empty.")
+    if [c.strip().lower() for c in rows[0]][:2] == ["file", "label"]:
+        rows = rows[1:]
+    mapping = {}
+    for lineno, row in enumerate(rows, start=1):
+        if len(row) != 2:
+            raise PointCloudFileError(
+                path, f"row {lineno} has {len(row)} columns; expected 'file,label'."
+            )
+        name, label = row[0].strip(), row[1].strip()
+        if name in mapping and mapping[name] != label:
+            raise PointCloudFileError(path, f"file {name!r} is labelled twice.")
+        mapping[name] = label
+    return path, mapping
+
+
+def read_segments(
+    folder_or_glob, labels=None, *, fields=None, nonfinite="drop", verbose=False
+):
+    """Read a folder of segmented objects, one file per object.
+
+    Read more in the :ref:`User Guide <io>`.
+
+    Parameters
+    ----------
+    folder_or_glob : str or path-like
+        A folder (every file with a supported extension in it, not
+        recursively, except one named ``labels.csv``) or a glob pattern such
+        as ``"scans/**/*.ply"``.
+    labels : str or path-like, default=None
+        A CSV file of ``file,label`` rows (a ``file,label`` header line is
+        optional). File names are relative to the folder (or to the common
+        folder of the glob matches). Every file read must be labelled and
+        every labelled file must exist.
+    fields : None, "all" or list of str, default=None
+        Extra per-point fields, as in :func:`read_point_cloud`; when given,
+        each cloud is ``(points, extras)``.
+    nonfinite : {"drop", "keep", "raise"}, default="drop"
+        Policy for NaN or infinite coordinates, as in
+        :func:`read_point_cloud`.
+    verbose : bool, default=False
+        Show a progress bar on standard error (only on a terminal).
+
+    Returns
+    -------
+    clouds : list of ndarray of shape (n_points_i, 3)
+        One cloud per file.
+    labels : ndarray of str of shape (n_clouds,) or None
+        The label of each cloud, or None without a labels file.
+    names : list of str
+        The file names, relative to the folder; the order of all three is
+        the natural sort of these names (``2.xyz`` before ``10.xyz``).
+
+    Raises
+    ------
+    MissingFileError
+        If the folder, the labels file, or a file it names does not exist.
+    PointCloudFileError
+        If no point-cloud file is found, a file is not labelled, or any file
+        cannot be read (see :func:`read_point_cloud`).
+    """
+    labels_path, mapping = (None, None) if labels is None else _read_labels(labels)
+    files, names = _list_files(folder_or_glob, labels_path)
+    if mapping is not None:
+        unknown = sorted(set(mapping) - set(names), key=_natural_key)
+        if unknown:
+            shown = ", ".join(unknown[:10]) + (" ..." if len(unknown) > 10 else "")
+            raise MissingFileError(
+                labels_path,
+                f"{len(unknown)} labelled file(s) not found in "
+                f"{folder_or_glob}: {shown}",
+            )
+        unlabelled = [n for n in names if n not in mapping]
+        if unlabelled:
+            shown = ", ".join(unlabelled[:10]) + (
+                " ..." if len(unlabelled) > 10 else ""
+            )
+            raise PointCloudFileError(
+                labels_path, f"{len(unlabelled)} file(s) have no label: {shown}"
+            )
+    show = None if verbose else False
+    clouds = [
+        read_point_cloud(f, fields=fields, nonfinite=nonfinite)
+        for f in progress(files, desc="reading", enabled=show)
+    ]
+    y = None if mapping is None else np.array([mapping[n] for n in names])
+    return clouds, y, names

@@ -1,0 +1,153 @@
+"""Validation of point-cloud collections: the one place estimators check X."""
+
+import numbers
+
+import numpy as np
+from sklearn.utils import check_array
+
+__all__ = ["check_point_clouds"]
+
+
+def _as_sequence(X, input_name):
+    """Return X as a list of per-cloud objects without stacking it."""
+    if isinstance(X, np.ndarray):
+        if X.dtype == object:
+            if X.ndim != 1:
+                raise ValueError(
+                    f"{input_name} as an object array must be 1-D (one cloud per "
+                    f"element), got shape {X.shape}."
+                )
+            return list(X)
+        if X.ndim == 2:
+            raise ValueError(
+                f"{input_name} is a single 2-D array of shape {X.shape}; skpcd "
+                "expects a sequence of point clouds. Wrap a single cloud in a "
+                "list: [cloud]."
+            )
+        if X.ndim == 3:
+            return list(X)
+        raise ValueError(
+            f"{input_name} must be a sequence of (n_points, 3+) arrays; got an "
+            f"array of shape {X.shape}."
+        )
+    if isinstance(X, (str, bytes)) or not hasattr(X, "__len__"):
+        raise TypeError(
+            f"{input_name} must be a sequence (list, tuple or 1-D object array) of "
+            f"(n_points, 3+) arrays, got {type(X).__name__}."
+        )
+    return list(X)
+
+
+def check_point_clouds(
+    X,
+    *,
+    dtype=(np.float64, np.float32),
+    min_points=1,
+    n_columns=None,
+    ensure_all_finite=True,
+    copy=False,
+    input_name="X",
+):
+    """Validate a collection of point clouds, one cloud at a time.
+
+    Each cloud is checked with :func:`sklearn.utils.check_array`; the
+    collection itself is never turned into one array, so clouds may have
+    different numbers of points.
+
+    Parameters
+    ----------
+    X : sequence of array-like of shape (n_points_i, n_columns_i)
+        The clouds: a list, a tuple, a 1-D object array or a 3-D array
+        (iterated over its first axis). Columns 0-2 are x, y, z; further
+        columns (normals, intensity...) are allowed. A lone 2-D array is
+        refused, because it is ambiguous: wrap it as ``[cloud]``.
+    dtype : dtype, tuple of dtypes or None, default=(np.float64, np.float32)
+        Accepted dtypes, as in :func:`~sklearn.utils.check_array`: a cloud
+        whose dtype is in the tuple is kept as it is, others are converted to
+        the first one.
+    min_points : int, default=1
+        Minimum number of points in every cloud. Use 0 to accept empty clouds.
+    n_columns : int, tuple of (int, int) or None, default=None
+        Required column count: an exact count, an inclusive ``(min, max)``
+        range (``max`` may be None), or None for "at least 3".
+    ensure_all_finite : bool, default=True
+        Refuse NaN and infinite values.
+    copy : bool, default=False
+        Always copy the clouds (otherwise they are copied only when a
+        conversion is needed).
+    input_name : str, default="X"
+        Name used in error messages.
+
+    Returns
+    -------
+    clouds : list of ndarray of shape (n_points_i, n_columns_i)
+        The validated clouds, in the order given.
+
+    Raises
+    ------
+    ValueError
+        If X is empty, is a single 2-D array, or a cloud has the wrong shape,
+        too few points or non-finite values. The message names the cloud by
+        its position.
+    TypeError
+        If X is not a sequence.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from skpcd.utils import check_point_clouds
+    >>> clouds = check_point_clouds([np.zeros((5, 3)), np.ones((2, 4))])
+    >>> [c.shape for c in clouds]
+    [(5, 3), (2, 4)]
+    >>> check_point_clouds(np.zeros((5, 3)))
+    Traceback (most recent call last):
+    ...
+    ValueError: X is a single 2-D array of shape (5, 3); skpcd expects a sequence of point clouds. Wrap a single cloud in a list: [cloud].
+    """  # noqa: E501
+    if not isinstance(min_points, numbers.Integral) or min_points < 0:
+        raise ValueError(f"min_points must be a non-negative integer, got {min_points}")
+    if n_columns is None:
+        lo, hi = 3, None
+    elif isinstance(n_columns, numbers.Integral):
+        lo = hi = int(n_columns)
+    else:
+        lo, hi = n_columns
+    items = _as_sequence(X, input_name)
+    if len(items) == 0:
+        raise ValueError(f"{input_name} is empty: at least one point cloud is needed.")
+    clouds = []
+    for i, cloud in enumerate(items):
+        where = f"{input_name}[{i}]"
+        if np.ndim(cloud) != 2:
+            raise ValueError(
+                f"{where} must be a 2-D array of shape (n_points, 3+), got an "
+                f"object with {np.ndim(cloud)} dimension(s)."
+            )
+        try:
+            cloud = check_array(
+                cloud,
+                dtype=dtype,
+                ensure_all_finite=ensure_all_finite,
+                ensure_min_samples=0,
+                ensure_min_features=0,
+                copy=copy,
+                input_name=where,
+            )
+        except ValueError as exc:
+            raise ValueError(f"{where}: {exc}") from exc
+        n, d = cloud.shape
+        if d < lo or (hi is not None and d > hi):
+            want = (
+                f"{lo}"
+                if lo == hi
+                else f"at least {lo}"
+                if hi is None
+                else (f"{lo} to {hi}")
+            )
+            raise ValueError(f"{where} has {d} column(s); {want} are required.")
+        if n < min_points:
+            raise ValueError(
+                f"{where} has {n} point(s); at least {min_points} are required."
+            )
+        clouds.append(cloud)
+    return clouds

@@ -1,0 +1,52 @@
+import numpy as np
+import pytest
+
+from skpcd.datasets import URBAN_CLASSES, make_point_clouds, make_urban_objects
+
+
+def test_urban_objects_reproducible_and_balanced():
+    a, ya = make_urban_objects(n_per_class=5, random_state=3)
+    b, yb = make_urban_objects(n_per_class=5, random_state=3)
+    assert len(a) == 25 and (ya == yb).all()
+    assert all(np.array_equal(u, v) for u, v in zip(a, b))
+    assert {k: int((ya == k).sum()) for k in URBAN_CLASSES} == dict.fromkeys(
+        URBAN_CLASSES, 5
+    )
+    c, _ = make_urban_objects(n_per_class=5, random_state=4)
+    assert not np.array_equal(a[0], c[0])
+
+
+def test_urban_objects_have_plausible_sizes():
+    clouds, labels = make_urban_objects(n_per_class=10, random_state=0)
+    height = {
+        k: [np.ptp(c[:, 2]) for c, y in zip(clouds, labels) if y == k]
+        for k in URBAN_CLASSES
+    }
+    assert max(height["car"]) < 2.5
+    assert min(height["pole"]) > 3.5
+    assert max(height["fence"]) < 2.7
+    assert all(len(c) >= 20 for c in clouds)
+
+
+def test_urban_objects_noise_free():
+    clouds, labels = make_urban_objects(n_per_class=1, noise=0, random_state=0)
+    assert all(np.isfinite(c).all() for c in clouds)
+    # without noise the car roof (cabin) is exactly flat at the box height
+    car = clouds[labels.tolist().index("car")]
+    top = np.isclose(car[:, 2], car[:, 2].max())
+    assert top.sum() > 10
+
+
+@pytest.mark.parametrize("bad", [{"n_per_class": 0}, {"noise": -1}])
+def test_urban_objects_bad_params(bad):
+    with pytest.raises(ValueError):
+        make_urban_objects(**bad)
+
+
+def test_make_point_clouds_shapes():
+    clouds = make_point_clouds(5, n_points=(10, 12), n_columns=4, random_state=0)
+    assert len(clouds) == 5
+    assert all(10 <= len(c) <= 12 and c.shape[1] == 4 for c in clouds)
+    assert all(len(c) == 7 for c in make_point_clouds(3, n_points=7, random_state=0))
+    with pytest.raises(ValueError):
+        make_point_clouds(2, n_columns=2)

@@ -1,0 +1,52 @@
+"""Common checks for every public estimator: sklearn's data-free ones and ours."""
+
+import pytest
+from sklearn.utils import estimator_checks as sk
+
+from skpcd.datasets import make_point_clouds, make_urban_objects
+from skpcd.features import ShapeFeatures
+from skpcd.utils.estimator_checks import ragged_checks
+
+# Estimators taking a list of clouds as X; those taking 2-D X go through
+# sklearn's parametrize_with_checks instead.
+RAGGED = [ShapeFeatures()]
+
+# sklearn checks that need no data and therefore apply to ragged estimators.
+DATA_FREE_CHECKS = [
+    sk.check_estimator_cloneable,
+    sk.check_estimator_repr,
+    sk.check_no_attributes_set_in_init,
+    sk.check_parameters_default_constructible,
+    sk.check_get_params_invariance,
+    sk.check_set_params,
+    sk.check_do_not_raise_errors_in_init_or_set_params,
+    sk.check_mixin_order,
+    sk.check_valid_tag_types,
+    sk.check_estimator_tags_renamed,
+    sk.check_param_validation,
+]
+
+
+def _id(obj):
+    return getattr(obj, "__name__", type(obj).__name__)
+
+
+@pytest.mark.parametrize("check", DATA_FREE_CHECKS, ids=_id)
+@pytest.mark.parametrize("estimator", RAGGED, ids=_id)
+def test_sklearn_data_free_checks(estimator, check):
+    check(type(estimator).__name__, estimator)
+
+
+@pytest.mark.parametrize("check", ragged_checks(), ids=_id)
+@pytest.mark.parametrize("estimator", RAGGED, ids=_id)
+def test_ragged_checks(estimator, check):
+    X = make_point_clouds(6, n_points=(20, 60), random_state=0)
+    check(estimator, X)
+
+
+def test_ragged_checks_supervised_pipeline():
+    from skpcd.classification import make_default_pipeline
+    from skpcd.utils.estimator_checks import check_ragged_estimator
+
+    clouds, labels = make_urban_objects(n_per_class=3, random_state=0)
+    check_ragged_estimator(make_default_pipeline(n_jobs=1), clouds, labels)
