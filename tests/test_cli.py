@@ -69,7 +69,7 @@ def test_format_report_confusion_matrix():
 
 def test_console_entry_point_default_data_quiet_when_not_a_tty():
     proc = subprocess.run(
-        [sys.executable, "-m", "skpcd", "evaluate", "--folds", "3"],
+        [sys.executable, "-m", "skpcd", "evaluate", "--folds", "2"],
         capture_output=True,
         text=True,
         check=True,

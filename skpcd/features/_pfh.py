@@ -1,0 +1,512 @@
+"""Point Feature Histograms (PFH) and Fast PFH, as PCL 1.13 computes them.
+
+The function forms (:func:`compute_pfh`, :func:`compute_fpfh`) take one
+cloud with its normals and neighbourhoods; the transformers take a list of
+clouds, search neighbourhoods once, estimate normals and run one parallel
+kernel over all points of all clouds.
+"""
+
+import typing
+from numbers import Integral, Real
+
+import numpy as np
+from sklearn.base import BaseEstimator, TransformerMixin, _fit_context
+from sklearn.utils._param_validation import Interval, StrOptions
+
+from skpcd.preprocessing._neighbors import Neighborhoods, compute_neighborhoods
+from skpcd.preprocessing._normals import (
+    _check_viewpoint,
+    _normals_packed,
+    pack_neighborhoods,
+)
+from skpcd.utils import check_point_clouds
+from skpcd.utils._parallel import numba_threads
+
+__all__ = ["FPFHTransformer", "PFHTransformer", "compute_fpfh", "compute_pfh"]
+
+FPFH_CONVENTIONS = ("pcl", "open3d", "paper")
+
+
+def _as_f32(points, normals, neighborhoods):
+    p = np.ascontiguousarray(np.asarray(points)[:, :3], dtype=np.float32)
+    n = np.ascontiguousarray(normals, dtype=np.float32)
+    if n.shape != p.shape:
+        raise ValueError(f"normals must have shape {p.shape}, got {n.shape}")
+    if not isinstance(neighborhoods, Neighborhoods):
+        raise TypeError("neighborhoods must come from compute_neighborhoods")
+    if neighborhoods.n_points != len(p):
+        raise ValueError(
+            f"neighborhoods cover {neighborhoods.n_points} points, "
+            f"the cloud has {len(p)}"
+        )
+    return p, n
+
+
+def _neighborhoods(points, neighborhoods, n_neighbors, radius, n_jobs):
+    if neighborhoods is not None:
+        return neighborhoods
+    return compute_neighborhoods(
+        points, n_neighbors=n_neighbors, radius=radius, n_jobs=n_jobs
+    )
+
+
+def compute_pfh(
+    points,
+    normals,
+    *,
+    n_neighbors=None,
+    radius=None,
+    neighborhoods=None,
+    n_bins=5,
+    n_jobs=None,
+):
+    """PFH of every point of one cloud, bin for bin as PCL's ``PFHEstimation``.
+
+    Parameters
+    ----------
+    points : array-like of shape (n_points, 3+)
+        The cloud (float32 precision is used, as in PCL).
+    normals : array-like of shape (n_points, 3)
+        Unit normals; NaN normals are binned as PCL bins them (bin 0).
+    n_neighbors, radius : int or float, default=None
+        The neighbourhood search, unless ``neighborhoods`` is given.
+    neighborhoods : Neighborhoods, default=None
+        Precomputed neighbourhoods, the point first in each.
+    n_bins : int, default=5
+        Subdivisions per feature (PCL ``nr_subdiv``); the histogram has
+        ``n_bins ** 3`` bins.
+    n_jobs : int, default=None
+        Threads; None means 1, -1 all cores.
+
+    Returns
+    -------
+    pfh : ndarray of shape (n_points, n_bins ** 3), dtype float32
+        Rows sum to 100; a point alone in its neighbourhood gets zeros.
+    """
+    nb = _neighborhoods(points, neighborhoods, n_neighbors, radius, n_jobs)
+    p, n = _as_f32(points, normals, nb)
+    from skpcd.features._pfh_kernels import pfh
+
+    with numba_threads(n_jobs):
+        return pfh(p, n, nb.indptr, nb.indices, int(n_bins))
+
+
+def _fpfh_packed(p, n, nb, n_bins, convention):
+    from skpcd.features import _pfh_kernels as k
+
+    s = k.spfh(p, n, nb.indptr, nb.indices, n_bins)
+    if convention == "paper":
+        return k.fpfh_paper(s, nb.indptr, nb.indices, nb.sqdist).astype(np.float32)
+    out = k.fpfh_pcl(s, nb.indptr, nb.indices, nb.sqdist, n_bins)
+    if convention == "open3d":
+        out += s
+    return out
+
+
+def compute_fpfh(
+    points,
+    normals,
+    *,
+    n_neighbors=None,
+    radius=None,
+    neighborhoods=None,
+    n_bins=11,
+    convention="pcl",
+    n_jobs=None,
+):
+    """FPFH of every point of one cloud.
+
+    Parameters
+    ----------
+    points : array-like of shape (n_points, 3+)
+        The cloud (float32 precision is used, as in PCL).
+    normals : array-like of shape (n_points, 3)
+        Unit normals.
+    n_neighbors, radius : int or float, default=None
+        The neighbourhood search, unless ``neighborhoods`` is given.
+    neighborhoods : Neighborhoods, default=None
+        Precomputed neighbourhoods, sorted by distance, the point first.
+    n_bins : int, default=11
+        Bins per feature; the descriptor has ``3 * n_bins`` values laid out
+        ``[f1 | f2 | f3]``.
+    convention : {"pcl", "open3d", "paper"}, default="pcl"
+        ``"pcl"``: PCL's ``FPFHEstimation``, the neighbours' SPFH weighted by
+        1/squared distance, the point's own SPFH left out, each block
+        rescaled to sum to 100. ``"open3d"``: the same plus the point's own
+        SPFH, so blocks sum to 200 (Open3D's ``compute_fpfh_feature``).
+        ``"paper"``: Rusu et al. (2009), SPFH(p) + (1/k) sum SPFH(q) / d,
+        not rescaled.
+    n_jobs : int, default=None
+        Threads; None means 1, -1 all cores.
+
+    Returns
+    -------
+    fpfh : ndarray of shape (n_points, 3 * n_bins), dtype float32
+        One row per point. A point without a neighbour at a non-zero
+        distance gets zeros (``"pcl"``) or its own SPFH.
+    """
+    if convention not in FPFH_CONVENTIONS:
+        raise ValueError(
+            f"convention must be one of {FPFH_CONVENTIONS}, got {convention!r}"
+        )
+    nb = _neighborhoods(points, neighborhoods, n_neighbors, radius, n_jobs)
+    p, n = _as_f32(points, normals, nb)
+    with numba_threads(n_jobs):
+        return _fpfh_packed(p, n, nb, int(n_bins), convention)
+
+
+class _LocalDescriptor(TransformerMixin, BaseEstimator):
+    """Shared machinery of the per-point histogram transformers."""
+
+    _parameter_constraints: typing.ClassVar[dict] = {
+        "n_neighbors": [Interval(Integral, 2, None, closed="left"), None],
+        "radius": [Interval(Real, 0, None, closed="neither"), None],
+        "n_bins": [Interval(Integral, 2, None, closed="left")],
+        "normals": [StrOptions({"estimate", "columns"})],
+        "normal_n_neighbors": [Interval(Integral, 3, None, closed="left"), None],
+        "normal_radius": [Interval(Real, 0, None, closed="neither"), None],
+        "viewpoint": ["array-like"],
+        "undefined": [StrOptions({"nan", "zero", "drop", "keep"})],
+        "pooling": [StrOptions({"mean", "sum", "max"}), None],
+        "n_jobs": [Integral, None],
+    }
+    _default_n_neighbors = 10
+
+    def _check_search(self):
+        if self.n_neighbors is not None and self.radius is not None:
+            raise ValueError(
+                "give n_neighbors or radius, not both "
+                f"(n_neighbors={self.n_neighbors}, radius={self.radius})"
+            )
+        if self.normal_n_neighbors is not None and self.normal_radius is not None:
+            raise ValueError("give normal_n_neighbors or normal_radius, not both")
+        _check_viewpoint(self.viewpoint)
+
+    def _validate(self, X):
+        clouds = check_point_clouds(X, ensure_all_finite=False)
+        for i, c in enumerate(clouds):
+            if not np.isfinite(c[:, :3]).all():
+                raise ValueError(f"X[{i}] has NaN or infinite coordinates.")
+            if self.normals == "columns" and c.shape[1] < 6:
+                raise ValueError(
+                    f"X[{i}] has {c.shape[1]} columns; normals='columns' reads the "
+                    "normals from columns 3-5."
+                )
+        return clouds
+
+    @_fit_context(prefer_skip_nested_validation=True)
+    def fit(self, X, y=None):
+        """Check the parameters and the clouds; nothing is learned.
+
+        Parameters
+        ----------
+        X : sequence of ndarray of shape (n_points_i, 3+)
+            The clouds, with normals in columns 3-5 when
+            ``normals="columns"``.
+        y : None
+            Ignored.
+
+        Returns
+        -------
+        self : object
+            The transformer.
+        """
+        self._check_search()
+        clouds = self._validate(X)
+        self.n_features_in_ = clouds[0].shape[1]
+        return self
+
+    def _compute(self, X):
+        """Packed descriptors, the undefined-point mask and the cloud offsets."""
+        self._check_search()
+        clouds = self._validate(X)
+        k = self.n_neighbors
+        if k is None and self.radius is None:
+            k = self._default_n_neighbors
+        xyz, offsets, nb = pack_neighborhoods(
+            clouds, n_neighbors=k, radius=self.radius, n_jobs=self.n_jobs
+        )
+        if self.normals == "columns":
+            normals = np.vstack([c[:, 3:6] for c in clouds]).astype(np.float64)
+        else:
+            nnb = nb
+            if self.normal_n_neighbors is not None or self.normal_radius is not None:
+                _, _, nnb = pack_neighborhoods(
+                    clouds,
+                    n_neighbors=self.normal_n_neighbors,
+                    radius=self.normal_radius,
+                    n_jobs=self.n_jobs,
+                )
+            vp = _check_viewpoint(self.viewpoint)
+            normals, _ = _normals_packed(xyz, nnb, vp, self.n_jobs)
+        p = xyz.astype(np.float32)
+        n = normals.astype(np.float32)
+        undefined = ~np.isfinite(n).all(axis=1) | (nb.sizes < 2)
+        with numba_threads(self.n_jobs):
+            out = self._kernel(p, n, nb)
+        return out, undefined, offsets
+
+    def undefined_mask(self, X):
+        """Which points have an undefined descriptor.
+
+        A descriptor is undefined where the point's normal is undefined (fewer
+        than 3 neighbours, or a collinear neighbourhood) or the point has no
+        neighbour but itself. What :meth:`transform` does with those points is
+        set by ``undefined``.
+
+        Parameters
+        ----------
+        X : sequence of ndarray of shape (n_points_i, 3+)
+            The clouds.
+
+        Returns
+        -------
+        masks : list of ndarray of bool of shape (n_points_i,)
+            True for the points whose descriptor is undefined.
+        """
+        _, undefined, offsets = self._compute(X)
+        return [undefined[offsets[i] : offsets[i + 1]] for i in range(len(offsets) - 1)]
+
+    def transform(self, X):
+        """Compute the descriptor of every point of every cloud.
+
+        Parameters
+        ----------
+        X : sequence of ndarray of shape (n_points_i, 3+)
+            The clouds, with normals in columns 3-5 when
+            ``normals="columns"``.
+
+        Returns
+        -------
+        descriptors : list of ndarray of shape (n_rows_i, n_features) or ndarray of shape (n_clouds, n_features)
+            One float32 array per cloud, a row per point (fewer with
+            ``undefined="drop"``); with ``pooling``, one row per cloud.
+        """  # noqa: E501
+        out, undefined, offsets = self._compute(X)
+        if self.undefined == "nan":
+            out[undefined] = np.nan
+        elif self.undefined == "zero":
+            out[undefined] = 0.0
+        rows = []
+        for i in range(len(offsets) - 1):
+            block = out[offsets[i] : offsets[i + 1]]
+            if self.undefined == "drop":
+                block = block[~undefined[offsets[i] : offsets[i + 1]]]
+            rows.append(block)
+        if self.pooling is None:
+            return rows
+        return np.vstack([_pool(block, self.pooling) for block in rows])
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.input_tags.two_d_array = False
+        tags.input_tags.allow_nan = True
+        tags.requires_fit = False
+        return tags
+
+
+def _pool(block, how):
+    valid = block[np.isfinite(block).all(axis=1)]
+    if len(valid) == 0:
+        return np.full(block.shape[1], np.nan, dtype=np.float32)
+    if how == "mean":
+        return valid.mean(axis=0, dtype=np.float64).astype(np.float32)
+    if how == "sum":
+        return valid.sum(axis=0, dtype=np.float64).astype(np.float32)
+    return valid.max(axis=0)
+
+
+_COMMON_PARAMS = """
+    n_neighbors : int, default=None
+        k for the k-nearest-neighbour search, the point itself included (PCL
+        ``setKSearch``, Open3D ``max_nn``). When neither ``n_neighbors`` nor
+        ``radius`` is given, k = 10.
+    radius : float, default=None
+        Radius search instead (PCL ``setRadiusSearch``); give one of the two.
+    n_bins : int, default=@N_BINS@
+        Bins per feature (@BINS_DOC@).
+    normals : {"estimate", "columns"}, default="estimate"
+        Estimate the normals (PCA, PCL's rules, see
+        :func:`~skpcd.preprocessing.estimate_normals`) or read them from
+        columns 3-5 of each cloud.
+    normal_n_neighbors : int, default=None
+        k for the normals; by default the descriptor's own neighbourhoods
+        are reused (one search for both).
+    normal_radius : float, default=None
+        Radius for the normals instead.
+    viewpoint : tuple of 3 float, default=(0.0, 0.0, 0.0)
+        Normals face this point (PCL ``setViewPoint``).
+    undefined : {"nan", "zero", "drop", "keep"}, default="nan"
+        Points whose descriptor is undefined (their normal is undefined, or
+        they have no neighbour): a NaN row, a zero row, no row, or the value
+        PCL computes for them anyway ("keep", which bins NaN features in
+        bin 0). :meth:`undefined_mask` says which points they are.
+    pooling : {"mean", "sum", "max"}, default=None
+        Return one row per cloud, pooled over its defined rows, instead of a
+        list of per-point arrays.
+    n_jobs : int, default=None
+        Threads for the searches and the kernels; None means 1, -1 all
+        cores.
+"""
+
+
+_CONVENTION_DOC = """    convention : {"pcl", "open3d", "paper"}, default="pcl"
+        PCL's FPFH, Open3D's (adds the point's own SPFH) or the paper's
+        (1/distance weights); see :func:`compute_fpfh`.
+"""
+
+
+def _params(n_bins, bins_doc):
+    return _COMMON_PARAMS.replace("@N_BINS@", str(n_bins)).replace(
+        "@BINS_DOC@", bins_doc
+    )
+
+
+class PFHTransformer(_LocalDescriptor):
+    __doc__ = f"""Point Feature Histogram of every point, bin for bin as PCL.
+
+    For every pair of points in a point's neighbourhood (the point
+    included), three angles between their normals and the line joining them
+    are binned into ``n_bins ** 3`` bins, f1 varying fastest; each pair adds
+    ``100 / n_pairs``, so a row sums to 100. This is PCL 1.13's
+    ``PFHEstimation`` (``PFHSignature125`` for ``n_bins=5``).
+
+    Read more in the :ref:`User Guide <local_descriptors>`.
+
+    Parameters
+    ----------{_params(5, "PCL ``nr_subdiv``; n_bins ** 3 bins")}
+    Attributes
+    ----------
+    n_features_in_ : int
+        Columns of the first cloud seen in :meth:`fit`.
+
+    See Also
+    --------
+    FPFHTransformer : The fast variant, O(k) per point.
+    compute_pfh : The function form for one cloud.
+
+    Notes
+    -----
+    Pairs at a zero distance, or whose offset is parallel to the source
+    normal, are binned as (0, 0, 0) features, as PCL does.
+
+    References
+    ----------
+    .. [1] R. B. Rusu, N. Blodow, Z. C. Marton, M. Beetz, "Aligning point
+       cloud views using persistent feature histograms", IROS 2008.
+
+    Examples
+    --------
+    >>> from skpcd.datasets import make_point_clouds
+    >>> from skpcd.features import PFHTransformer
+    >>> clouds = make_point_clouds(2, n_points=40, random_state=0)
+    >>> [h.shape for h in PFHTransformer(n_neighbors=8).fit_transform(clouds)]
+    [(40, 125), (40, 125)]
+    """
+
+    def __init__(
+        self,
+        n_neighbors=None,
+        *,
+        radius=None,
+        n_bins=5,
+        normals="estimate",
+        normal_n_neighbors=None,
+        normal_radius=None,
+        viewpoint=(0.0, 0.0, 0.0),
+        undefined="nan",
+        pooling=None,
+        n_jobs=None,
+    ):
+        self.n_neighbors = n_neighbors
+        self.radius = radius
+        self.n_bins = n_bins
+        self.normals = normals
+        self.normal_n_neighbors = normal_n_neighbors
+        self.normal_radius = normal_radius
+        self.viewpoint = viewpoint
+        self.undefined = undefined
+        self.pooling = pooling
+        self.n_jobs = n_jobs
+
+    def _kernel(self, p, n, nb):
+        from skpcd.features._pfh_kernels import pfh
+
+        return pfh(p, n, nb.indptr, nb.indices, int(self.n_bins))
+
+
+class FPFHTransformer(_LocalDescriptor):
+    __doc__ = f"""Fast Point Feature Histogram of every point.
+
+    The SPFH of a point bins the three angles of the pairs (point,
+    neighbour) into three ``n_bins`` histograms; the FPFH combines the
+    neighbours' SPFH, by default exactly as PCL 1.13's ``FPFHEstimation``
+    (weights 1/squared distance, own SPFH left out, each block rescaled to
+    100). ``convention`` selects Open3D's or the original paper's variant.
+
+    Read more in the :ref:`User Guide <local_descriptors>`.
+
+    Parameters
+    ----------{_params(11, "3 * n_bins values")}{_CONVENTION_DOC}
+    Attributes
+    ----------
+    n_features_in_ : int
+        Columns of the first cloud seen in :meth:`fit`.
+
+    See Also
+    --------
+    PFHTransformer : The full pairwise histogram.
+    compute_fpfh : The function form for one cloud.
+
+    Notes
+    -----
+    ``n_bins=11`` gives PCL's ``FPFHSignature33``.
+
+    References
+    ----------
+    .. [1] R. B. Rusu, N. Blodow, M. Beetz, "Fast Point Feature Histograms
+       (FPFH) for 3D registration", ICRA 2009.
+
+    Examples
+    --------
+    >>> from skpcd.datasets import make_point_clouds
+    >>> from skpcd.features import FPFHTransformer
+    >>> clouds = make_point_clouds(2, n_points=40, random_state=0)
+    >>> FPFHTransformer(n_neighbors=8, pooling="mean").fit_transform(clouds).shape
+    (2, 33)
+    """
+
+    _parameter_constraints: typing.ClassVar[dict] = {
+        **_LocalDescriptor._parameter_constraints,
+        "convention": [StrOptions(set(FPFH_CONVENTIONS))],
+    }
+
+    def __init__(
+        self,
+        n_neighbors=None,
+        *,
+        radius=None,
+        n_bins=11,
+        normals="estimate",
+        normal_n_neighbors=None,
+        normal_radius=None,
+        viewpoint=(0.0, 0.0, 0.0),
+        undefined="nan",
+        pooling=None,
+        convention="pcl",
+        n_jobs=None,
+    ):
+        self.n_neighbors = n_neighbors
+        self.radius = radius
+        self.n_bins = n_bins
+        self.normals = normals
+        self.normal_n_neighbors = normal_n_neighbors
+        self.normal_radius = normal_radius
+        self.viewpoint = viewpoint
+        self.undefined = undefined
+        self.pooling = pooling
+        self.convention = convention
+        self.n_jobs = n_jobs
+
+    def _kernel(self, p, n, nb):
+        return _fpfh_packed(p, n, nb, int(self.n_bins), self.convention)

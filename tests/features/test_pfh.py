@@ -1,0 +1,215 @@
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from skpcd.datasets import make_point_clouds
+from skpcd.features import FPFHTransformer, PFHTransformer, compute_fpfh, compute_pfh
+from skpcd.features._pfh_kernels import pair_features
+from skpcd.preprocessing import compute_neighborhoods, estimate_normals
+
+F = np.float32
+
+
+def ref_pair(p1, n1, p2, n2):
+    """Slow NumPy float32 version of PCL's computePairFeatures."""
+    def dot(a, b):
+        return (a[0] * b[0] + a[2] * b[2]) + a[1] * b[1]
+
+    d = (p2 - p1).astype(F)
+    f4 = F(np.sqrt(dot(d, d)))
+    if f4 == 0:
+        return (0.0, 0.0, 0.0)
+    a1, a2 = dot(n1, d) / f4, dot(n2, d) / f4
+    if np.arccos(abs(a1)) > np.arccos(abs(a2)):
+        u, t, d, f3 = n2, n1, -d, -a2
+    else:
+        u, t, f3 = n1, n2, a1
+    v = np.cross(d, u).astype(F)
+    vn = F(np.sqrt(dot(v, v)))
+    if vn == 0:
+        return (0.0, 0.0, 0.0)
+    v = v / vn
+    w = np.cross(u, v).astype(F)
+    return (float(np.arctan2(dot(w, t), dot(u, t))), float(dot(v, t)), float(f3))
+
+
+def ref_bin(f, n, angle):
+    if np.isnan(f):
+        return 0
+    x = np.floor(n * ((f + np.pi) / (2 * np.pi) if angle else (f + 1.0) * 0.5))
+    return int(min(max(x, 0), n - 1))
+
+
+def ref_pfh(points, normals, nb, n_bins=5):
+    out = np.zeros((len(points), n_bins**3))
+    for i in range(len(points)):
+        idx = nb.indices[nb.indptr[i] : nb.indptr[i + 1]]
+        m = len(idx)
+        for a in range(m):
+            for b in range(a):
+                f1, f2, f3 = ref_pair(points[idx[a]], normals[idx[a]], points[idx[b]], normals[idx[b]])
+                h = ref_bin(f1, n_bins, True) + n_bins * ref_bin(f2, n_bins, False)
+                h += n_bins**2 * ref_bin(f3, n_bins, False)
+                out[i, h] += 100.0 / (m * (m - 1) // 2)
+    return out
+
+
+def _cloud(seed=0, n=120):
+    pts = make_point_clouds(1, n_points=n, noise=0.01, random_state=seed)[0]
+    normals, _ = estimate_normals(pts, n_neighbors=10)
+    return pts.astype(F), normals.astype(F)
+
+
+def test_pair_features_hand_computed():
+    o, z, x = np.zeros(3, F), np.array([0, 0, 1], F), np.array([1, 0, 0], F)
+    assert pair_features(o, z, x, z) == (0.0, 0.0, 0.0, 1.0)
+    f1, f2, f3, f4 = pair_features(o, z, x, x)
+    # n2 = x: u = z, v = d x u = (0, -1, 0), w = u x v = (1, 0, 0): f1 = atan2(1, 0)
+    assert f1 == pytest.approx(np.pi / 2) and f2 == 0 and f3 == 0 and f4 == 1
+    # duplicates and offsets parallel to the normal fail and give zeros
+    assert pair_features(o, z, o, x) == (0.0, 0.0, 0.0, 0.0)
+    assert pair_features(o, z, z, z) == (0.0, 0.0, 0.0, 0.0)
+
+
+def test_pair_features_equal_numpy_reference():
+    pts, normals = _cloud(1)
+    rng = np.random.default_rng(0)
+    for i, j in rng.integers(0, len(pts), size=(500, 2)):
+        got = pair_features(pts[i], normals[i], pts[j], normals[j])[:3]
+        np.testing.assert_allclose(got, ref_pair(pts[i], normals[i], pts[j], normals[j]), atol=2e-6)
+
+
+def test_pfh_equals_reference_and_sums_to_100():
+    pts, normals = _cloud(2, 80)
+    nb = compute_neighborhoods(pts, n_neighbors=8)
+    got = compute_pfh(pts, normals, neighborhoods=nb)
+    ref = ref_pfh(pts, normals, nb)
+    assert got.dtype == np.float32 and got.shape == (80, 125)
+    # float32 numpy and libm may differ by an ulp on a few bin edges
+    close = np.abs(got - ref).sum(axis=1) < 1e-3
+    assert close.mean() > 0.97
+    np.testing.assert_allclose(got.sum(axis=1), 100, rtol=1e-5)
+
+
+def test_pfh_bin_layout_f1_fastest():
+    # two points, same normal, offset along x: the pair bins at f = (0, 0, 0)
+    pts = np.array([[0, 0, 0], [1, 0, 0]], F)
+    normals = np.array([[0, 0, 1], [0, 0, 1]], F)
+    h = compute_pfh(pts, normals, n_neighbors=2)
+    assert np.flatnonzero(h[0]).tolist() == [62] and h[0, 62] == 100
+    # n2 along x makes f1 = pi/2: bin 3 for f1, 2 for f2 and f3
+    normals[1] = [1, 0, 0]
+    h = compute_pfh(pts, normals, n_neighbors=2, n_bins=5)
+    f1, f2, f3, _ = pair_features(pts[1], normals[1], pts[0], normals[0])
+    expect = ref_bin(f1, 5, True) + 5 * ref_bin(f2, 5, False) + 25 * ref_bin(f3, 5, False)
+    assert np.flatnonzero(h[0]).tolist() == [expect]
+
+
+def test_nan_normals_go_to_bin_zero_and_lone_points_are_zero():
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [50, 50, 50]], F)
+    normals = np.array([[np.nan] * 3, [0, 0, 1], [0, 0, 1], [0, 0, 1]], F)
+    h = compute_pfh(pts, normals, radius=2.0)
+    assert (h[3] == 0).all()
+    assert h[0].sum() == pytest.approx(100)
+    # the pairs with the NaN-normal point have f1 = f2 = NaN (bin 0) at least
+    assert h[0, [0, 25, 50, 75, 100]].sum() > 0
+
+
+def test_fpfh_conventions_follow_their_definitions():
+    pts, normals = _cloud(3, 150)
+    nb = compute_neighborhoods(pts, n_neighbors=10)
+    from skpcd.features._pfh_kernels import spfh
+
+    s = spfh(pts, normals, nb.indptr, nb.indices, 11)
+    pcl = compute_fpfh(pts, normals, neighborhoods=nb)
+    o3d = compute_fpfh(pts, normals, neighborhoods=nb, convention="open3d")
+    paper = compute_fpfh(pts, normals, neighborhoods=nb, convention="paper")
+    blocks = pcl.reshape(-1, 3, 11).sum(axis=2)
+    np.testing.assert_allclose(blocks, 100, rtol=1e-4)
+    np.testing.assert_allclose(o3d, pcl + s, rtol=1e-6)
+    np.testing.assert_allclose(o3d.reshape(-1, 3, 11).sum(axis=2), 200, rtol=1e-4)
+    # PCL's weighting, recomputed in float64
+    i = 17
+    idx = nb.indices[nb.indptr[i] : nb.indptr[i + 1]]
+    d2 = nb.sqdist[nb.indptr[i] : nb.indptr[i + 1]].astype(np.float64)
+    keep = d2 > 0
+    acc = (s[idx[keep]] / d2[keep, None]).sum(axis=0).reshape(3, 11)
+    np.testing.assert_allclose(pcl[i], (100 * acc / acc.sum(axis=1, keepdims=True)).ravel(), rtol=1e-4)
+    paper_ref = s[i] + (s[idx[keep]] / np.sqrt(d2[keep, None])).sum(axis=0) / keep.sum()
+    np.testing.assert_allclose(paper[i], paper_ref, rtol=1e-5)
+    # SPFH: each block sums to 100
+    np.testing.assert_allclose(s.reshape(-1, 3, 11).sum(axis=2), 100, rtol=1e-5)
+
+
+def test_transformer_undefined_policies_and_pooling():
+    line = np.column_stack([np.zeros(12), np.zeros(12), np.arange(12.0)])
+    plane = make_point_clouds(1, n_points=60, random_state=4)[0]
+    X = [plane, np.vstack([plane + 50, line])]
+    t = PFHTransformer(n_neighbors=6)
+    mask = t.undefined_mask(X)
+    assert mask[0].sum() == 0 and mask[1][60:].all() and mask[1][:60].sum() == 0
+    nan_rows = t.fit_transform(X)
+    assert np.isnan(nan_rows[1][60:]).all() and np.isfinite(nan_rows[1][:60]).all()
+    zero_rows = t.set_params(undefined="zero").fit_transform(X)
+    assert (zero_rows[1][60:] == 0).all()
+    dropped = t.set_params(undefined="drop").fit_transform(X)
+    assert [len(d) for d in dropped] == [60, 60]
+    kept = t.set_params(undefined="keep").fit_transform(X)
+    np.testing.assert_allclose(kept[1][60:].sum(axis=1), 100, rtol=1e-5)
+    pooled = t.set_params(undefined="nan", pooling="mean").fit_transform(X)
+    np.testing.assert_allclose(pooled[1], nan_rows[1][:60].mean(axis=0), rtol=1e-5)
+    np.testing.assert_allclose(pooled[0], nan_rows[0].mean(axis=0), rtol=1e-5)
+
+
+def test_transformer_reads_normals_from_columns():
+    pts, normals = _cloud(5, 70)
+    X = [np.hstack([pts, normals]).astype(np.float64)]
+    a = PFHTransformer(n_neighbors=9, normals="columns").fit_transform(X)[0]
+    b = compute_pfh(pts, normals, n_neighbors=9)
+    np.testing.assert_array_equal(a, b)
+    with pytest.raises(ValueError, match="columns 3-5"):
+        PFHTransformer(normals="columns").fit_transform([pts])
+
+
+def test_transformer_argument_errors():
+    X = make_point_clouds(2, n_points=30, random_state=0)
+    with pytest.raises(ValueError, match="not both"):
+        PFHTransformer(n_neighbors=5, radius=1.0).fit(X)
+    with pytest.raises(ValueError, match="Wrap a single cloud"):
+        FPFHTransformer().fit_transform(X[0])
+    bad = X[0].copy()
+    bad[0, 2] = np.inf
+    with pytest.raises(ValueError, match=r"X\[1\] has NaN or infinite"):
+        FPFHTransformer().fit_transform([X[1], bad])
+    with pytest.raises(ValueError, match=r"X\[0\] has 0 point"):
+        PFHTransformer().fit_transform([np.zeros((0, 3))])
+
+
+def _rigid(seed):
+    rng = np.random.default_rng(seed)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    if np.linalg.det(q) < 0:
+        q[:, 0] = -q[:, 0]
+    return q, rng.uniform(-100, 100, 3)
+
+
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_invariant_to_rigid_motion_and_point_order(seed):
+    pts = make_point_clouds(1, n_points=150, noise=0.01, random_state=seed)[0]
+    rot, shift = _rigid(seed)
+    order = np.random.default_rng(seed).permutation(len(pts))
+    # the viewpoint moves with the cloud, so normals keep their orientation
+    vp = np.array([0.0, 0.0, 50.0])
+    for cls in (PFHTransformer, FPFHTransformer):
+        base = cls(n_neighbors=10, viewpoint=vp).fit_transform([pts])[0]
+        moved = cls(n_neighbors=10, viewpoint=vp @ rot.T + shift).fit_transform(
+            [pts @ rot.T + shift]
+        )[0]
+        shuffled = cls(n_neighbors=10, viewpoint=vp).fit_transform([pts[order]])[0]
+        for other in (moved, shuffled[np.argsort(order)]):
+            l1 = np.abs(other - base).sum(axis=1)
+            # rounding can flip the swap of a nearly-symmetric pair (2.2 of 100)
+            assert np.mean(l1 < 1e-3) > 0.95
+            assert np.quantile(l1, 0.99) < 10
