@@ -60,12 +60,20 @@ def estimate_normals(
     Returns
     -------
     normals : ndarray of shape (n_points, 3)
-        Unit normals, float64. NaN where undefined: fewer than 3 neighbours,
-        or a neighbourhood whose points are collinear or coincide (to about
-        1e-6 of its extent), as PCL 1.13.0 gives NaN there.
+        Unit normals (float32 values in a float64 array). NaN where
+        undefined: fewer than 3 neighbours, or a neighbourhood whose points
+        are exactly collinear or coincide, as in PCL 1.13.0.
     curvature : ndarray of shape (n_points,)
         Surface variation in [0, 1/3]; NaN with fewer than 3 neighbours, 0
         when all neighbours coincide.
+
+    Notes
+    -----
+    The computation follows PCL's ``NormalEstimation`` operation by
+    operation in float32 (covariance accumulated about the first neighbour,
+    ``computeRoots``, ``eigen33``), so that the normals, and the PFH built
+    on them, agree with PCL's. Coordinates are rounded to float32 first:
+    subtract a local origin from projected coordinates with large values.
 
     Examples
     --------
@@ -100,18 +108,19 @@ def _normals_packed(xyz, neighborhoods, viewpoint, n_jobs):
     """Kernel call on packed arrays (one or many clouds, global indices)."""
     from skpcd.preprocessing._normals_kernels import normals_pca
 
-    normals = np.empty((len(xyz), 3), dtype=np.float64)
-    curvature = np.empty(len(xyz), dtype=np.float64)
+    n = len(xyz)
+    normals = np.empty((n, 3), dtype=np.float32)
+    curvature = np.empty(n, dtype=np.float32)
     with numba_threads(n_jobs):
         normals_pca(
-            xyz,
+            np.ascontiguousarray(xyz, dtype=np.float32),
             neighborhoods.indptr,
             neighborhoods.indices,
-            viewpoint,
+            viewpoint.astype(np.float32),
             normals,
             curvature,
         )
-    return normals, curvature
+    return normals.astype(np.float64), curvature.astype(np.float64)
 
 
 class NormalEstimator(TransformerMixin, BaseEstimator):

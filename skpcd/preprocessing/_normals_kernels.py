@@ -1,84 +1,116 @@
-"""numba kernels for normal estimation (PCA of each neighbourhood)."""
+"""numba kernels for normal estimation, following PCL 1.13.0 in float32.
+
+``NormalEstimation`` accumulates the covariance in float with coordinates
+shifted by the first neighbour (``computeMeanAndCovarianceMatrix``), finds
+the smallest eigenvalue with ``computeRoots`` and its eigenvector as the
+longest cross product of two rows of ``A - lambda I`` (``eigen33``), and
+flips the normal towards the viewpoint. The same operations in the same
+order give normals equal to PCL's to the last bit or close to it, which
+matters because PFH's swap rule turns last-bit differences into different
+bins. A collinear neighbourhood makes every cross product zero and the
+normal NaN, as in PCL 1.13.0.
+"""
 
 import math
 
 import numpy as np
 from numba import njit, prange
 
-# Below this squared norm (of a cross product of rows of the scaled,
-# shifted covariance) the smallest eigenvector is undefined: the
-# neighbourhood is collinear or its points coincide.
-_DEGENERATE = 1e-24
+F0 = np.float32(0.0)
+F05 = np.float32(0.5)
+F1 = np.float32(1.0)
+F2 = np.float32(2.0)
+FLT_EPS = np.float32(np.finfo(np.float32).eps)
+FLT_MIN = np.float32(np.finfo(np.float32).tiny)
+INV3 = np.float32(1.0 / 3.0)
+SQRT3 = np.float32(math.sqrt(np.float32(3.0)))
 
 
 @njit(cache=True, nogil=True)
-def smallest_eigenpair(a00, a01, a02, a11, a12, a22):
-    """Smallest eigenvalue and its unit eigenvector of a symmetric 3x3 matrix.
+def _roots2(b, c):
+    # PCL computeRoots2: d = b*b - 4.0*c is evaluated in double
+    d = np.float32(np.float64(b * b) - 4.0 * np.float64(c))
+    if d < 0.0:
+        d = F0
+    sd = np.float32(math.sqrt(d))
+    return F0, F05 * (b - sd), F05 * (b + sd)
 
-    Eigenvalues by the trigonometric method, the eigenvector by the largest
-    cross product of two rows of ``A - lambda_min I`` (as PCL's ``eigen33``).
-    Returns NaN components when the eigenvector is undefined.
-    """
-    scale = max(abs(a00), abs(a01), abs(a02), abs(a11), abs(a12), abs(a22))
-    nan = np.nan
-    if scale == 0.0:
-        return 0.0, 0.0, 0.0, nan, nan, nan
-    a00 /= scale
-    a01 /= scale
-    a02 /= scale
-    a11 /= scale
-    a12 /= scale
-    a22 /= scale
-    q = (a00 + a11 + a22) / 3.0
-    p1 = a01 * a01 + a02 * a02 + a12 * a12
-    b00, b11, b22 = a00 - q, a11 - q, a22 - q
-    p2 = b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * p1
-    if p2 <= 0.0:  # isotropic: every direction is an eigenvector
-        return q * scale, q * scale, q * scale, nan, nan, nan
-    p = math.sqrt(p2 / 6.0)
-    det = (
-        b00 * (b11 * b22 - a12 * a12)
-        - a01 * (a01 * b22 - a12 * a02)
-        + a02 * (a01 * a12 - b11 * a02)
-    )
-    r = det / (2.0 * p * p * p)
-    r = min(1.0, max(-1.0, r))
-    phi = math.acos(r) / 3.0
-    lam_max = q + 2.0 * p * math.cos(phi)
-    lam_min = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
-    lam_mid = 3.0 * q - lam_max - lam_min
-    # rows of A - lam_min I
-    r0x, r0y, r0z = a00 - lam_min, a01, a02
-    r1x, r1y, r1z = a01, a11 - lam_min, a12
-    r2x, r2y, r2z = a02, a12, a22 - lam_min
-    c1x, c1y, c1z = r0y * r1z - r0z * r1y, r0z * r1x - r0x * r1z, r0x * r1y - r0y * r1x
-    c2x, c2y, c2z = r0y * r2z - r0z * r2y, r0z * r2x - r0x * r2z, r0x * r2y - r0y * r2x
-    c3x, c3y, c3z = r1y * r2z - r1z * r2y, r1z * r2x - r1x * r2z, r1x * r2y - r1y * r2x
-    l1 = c1x * c1x + c1y * c1y + c1z * c1z
-    l2 = c2x * c2x + c2y * c2y + c2z * c2z
-    l3 = c3x * c3x + c3y * c3y + c3z * c3z
-    lam_min = max(lam_min, 0.0) * scale
-    lam_mid = max(lam_mid, 0.0) * scale
-    lam_max = max(lam_max, 0.0) * scale
-    if l1 >= l2 and l1 >= l3:
-        best, vx, vy, vz = l1, c1x, c1y, c1z
-    elif l2 >= l3:
-        best, vx, vy, vz = l2, c2x, c2y, c2z
-    else:
-        best, vx, vy, vz = l3, c3x, c3y, c3z
-    if best <= _DEGENERATE:
-        return lam_min, lam_mid, lam_max, nan, nan, nan
-    norm = math.sqrt(best)
-    return lam_min, lam_mid, lam_max, vx / norm, vy / norm, vz / norm
+
+@njit(cache=True, nogil=True)
+def smallest_root(m00, m01, m02, m11, m12, m22):
+    """PCL's ``computeRoots`` (float32): the smallest eigenvalue."""
+    c0 = (
+        (((m00 * m11) * m22 + ((F2 * m01) * m02) * m12) - (m00 * m12) * m12)
+        - (m11 * m02) * m02
+    ) - (m22 * m01) * m01
+    c1 = ((((m00 * m11 - m01 * m01) + m00 * m22) - m02 * m02) + m11 * m22) - m12 * m12
+    c2 = (m00 + m11) + m22
+    if abs(c0) < FLT_EPS:
+        return _roots2(c2, c1)[0]
+    c2_over_3 = c2 * INV3
+    a_over_3 = (c1 - c2 * c2_over_3) * INV3
+    if a_over_3 > F0:
+        a_over_3 = F0
+    half_b = F05 * (c0 + c2_over_3 * ((F2 * c2_over_3) * c2_over_3 - c1))
+    q = half_b * half_b + (a_over_3 * a_over_3) * a_over_3
+    if q > F0:
+        q = F0
+    rho = np.float32(math.sqrt(-a_over_3))
+    theta = np.float32(math.atan2(np.float32(math.sqrt(-q)), half_b)) * INV3
+    cos_t = np.float32(math.cos(theta))
+    sin_t = np.float32(math.sin(theta))
+    r0 = c2_over_3 + (F2 * rho) * cos_t
+    r1 = c2_over_3 - rho * (cos_t + SQRT3 * sin_t)
+    r2 = c2_over_3 - rho * (cos_t - SQRT3 * sin_t)
+    if r0 >= r1:
+        r0, r1 = r1, r0
+    if r1 >= r2:
+        r1, r2 = r2, r1
+        if r0 >= r1:
+            r0, r1 = r1, r0
+    if r0 <= F0:
+        return _roots2(c2, c1)[0]
+    return r0
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def eigen33_smallest(c00, c01, c02, c11, c12, c22):
+    """PCL 1.13.0's ``eigen33``: smallest eigenvalue and its eigenvector."""
+    scale = max(abs(c00), abs(c01), abs(c02), abs(c11), abs(c12), abs(c22))
+    if scale <= FLT_MIN:
+        scale = F1
+    m00, m01, m02 = c00 / scale, c01 / scale, c02 / scale
+    m11, m12, m22 = c11 / scale, c12 / scale, c22 / scale
+    lam = smallest_root(m00, m01, m02, m11, m12, m22)
+    m00 -= lam
+    m11 -= lam
+    m22 -= lam
+    # rows (m00 m01 m02), (m01 m11 m12), (m02 m12 m22); cross products 01, 02, 12
+    ax, ay, az = m01 * m12 - m02 * m11, m02 * m01 - m00 * m12, m00 * m11 - m01 * m01
+    bx, by, bz = m01 * m22 - m02 * m12, m02 * m02 - m00 * m22, m00 * m12 - m01 * m02
+    cx, cy, cz = m11 * m22 - m12 * m12, m12 * m02 - m01 * m22, m01 * m12 - m11 * m02
+    # Eigen's unrolled 3-term reduction sums x + (y + z)
+    la = np.float32(math.sqrt(ax * ax + (ay * ay + az * az)))
+    lb = np.float32(math.sqrt(bx * bx + (by * by + bz * bz)))
+    lc = np.float32(math.sqrt(cx * cx + (cy * cy + cz * cz)))
+    # Eigen's maxCoeff keeps the first maximum
+    best, vx, vy, vz = la, ax, ay, az
+    if lb > best:
+        best, vx, vy, vz = lb, bx, by, bz
+    if lc > best:
+        best, vx, vy, vz = lc, cx, cy, cz
+    if best == F0:  # rank 1 (collinear) or rank 0: PCL 1.13.0 divides 0 by 0
+        return lam * scale, np.float32(np.nan), np.float32(np.nan), np.float32(np.nan)
+    return lam * scale, vx / best, vy / best, vz / best
 
 
 @njit(cache=True, nogil=True, parallel=True)
 def normals_pca(points, indptr, indices, viewpoint, normals, curvature):
     """Normals and curvature of every point from its CSR neighbourhood.
 
-    ``normals`` (n, 3) and ``curvature`` (n,) are filled in place. Fewer than
-    three neighbours, or a collinear neighbourhood, give NaN normals; fewer
-    than three neighbours also give NaN curvature (PCL's rules).
+    ``points`` and ``viewpoint`` are float32; ``normals`` (n, 3) and
+    ``curvature`` (n,) are filled in place. Fewer than three neighbours give
+    NaN normal and curvature (PCL's rule).
     """
     n = len(indptr) - 1
     for i in prange(n):
@@ -88,37 +120,39 @@ def normals_pca(points, indptr, indices, viewpoint, normals, curvature):
             normals[i, 0] = normals[i, 1] = normals[i, 2] = np.nan
             curvature[i] = np.nan
             continue
-        # two passes: the mean, then the centred second moments
-        mx = my = mz = 0.0
+        k = indices[start]
+        kx, ky, kz = points[k, 0], points[k, 1], points[k, 2]
+        a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = F0
         for t in range(start, stop):
             j = indices[t]
-            mx += points[j, 0]
-            my += points[j, 1]
-            mz += points[j, 2]
-        mx /= m
-        my /= m
-        mz /= m
-        cxx = cxy = cxz = cyy = cyz = czz = 0.0
-        for t in range(start, stop):
-            j = indices[t]
-            dx = points[j, 0] - mx
-            dy = points[j, 1] - my
-            dz = points[j, 2] - mz
-            cxx += dx * dx
-            cxy += dx * dy
-            cxz += dx * dz
-            cyy += dy * dy
-            cyz += dy * dz
-            czz += dz * dz
-        lam0, lam1, lam2, nx, ny, nz = smallest_eigenpair(
-            cxx / m, cxy / m, cxz / m, cyy / m, cyz / m, czz / m
-        )
-        total = lam0 + lam1 + lam2
-        curvature[i] = abs(lam0 / total) if total > 0.0 else 0.0
+            x = points[j, 0] - kx
+            y = points[j, 1] - ky
+            z = points[j, 2] - kz
+            a0 += x * x
+            a1 += x * y
+            a2 += x * z
+            a3 += y * y
+            a4 += y * z
+            a5 += z * z
+            a6 += x
+            a7 += y
+            a8 += z
+        cnt = np.float32(m)
+        a0, a1, a2, a3, a4 = a0 / cnt, a1 / cnt, a2 / cnt, a3 / cnt, a4 / cnt
+        a5, a6, a7, a8 = a5 / cnt, a6 / cnt, a7 / cnt, a8 / cnt
+        c00 = a0 - a6 * a6
+        c01 = a1 - a6 * a7
+        c02 = a2 - a6 * a8
+        c11 = a3 - a7 * a7
+        c12 = a4 - a7 * a8
+        c22 = a5 - a8 * a8
+        lam, nx, ny, nz = eigen33_smallest(c00, c01, c02, c11, c12, c22)
+        trace = (c00 + c11) + c22
+        curvature[i] = abs(lam / trace) if trace != F0 else F0
         vx = viewpoint[0] - points[i, 0]
         vy = viewpoint[1] - points[i, 1]
         vz = viewpoint[2] - points[i, 2]
-        if vx * nx + vy * ny + vz * nz < 0.0:
+        if (vx * nx + vy * ny) + vz * nz < F0:
             nx, ny, nz = -nx, -ny, -nz
         normals[i, 0] = nx
         normals[i, 1] = ny

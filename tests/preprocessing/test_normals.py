@@ -34,15 +34,16 @@ def test_matches_numpy_reference():
     nb = compute_neighborhoods(pts, n_neighbors=12)
     normals, curv = estimate_normals(pts, neighborhoods=nb, viewpoint=(1, 2, 3))
     ref_n, ref_c = _reference(pts, nb, np.array([1.0, 2, 3]))
-    np.testing.assert_allclose(normals, ref_n, atol=1e-8)
-    np.testing.assert_allclose(curv, ref_c, atol=1e-10)
+    # float32 arithmetic, as PCL
+    np.testing.assert_allclose(normals, ref_n, atol=1e-4)
+    np.testing.assert_allclose(curv, ref_c, atol=1e-5)
 
 
 def test_plane_faces_viewpoint():
     g = np.stack(np.meshgrid(np.arange(6.0), np.arange(6.0), [0.0]), -1).reshape(-1, 3)
     up, c = estimate_normals(g, n_neighbors=9, viewpoint=(0, 0, 10))
-    np.testing.assert_allclose(up, np.tile([0, 0, 1.0], (36, 1)), atol=1e-12)
-    np.testing.assert_allclose(c, 0, atol=1e-12)
+    np.testing.assert_allclose(up, np.tile([0, 0, 1.0], (36, 1)), atol=1e-6)
+    np.testing.assert_allclose(c, 0, atol=1e-7)
     down, _ = estimate_normals(g, n_neighbors=9, viewpoint=(0, 0, -10))
     np.testing.assert_allclose(down, -up)
 
@@ -93,8 +94,8 @@ def test_rotation_equivariance(seed, angle):
     vp = np.array([3.0, -2.0, 40.0])
     n0, c0 = estimate_normals(pts, n_neighbors=10, viewpoint=vp)
     n1, c1 = estimate_normals(pts @ rot.T + 7, n_neighbors=10, viewpoint=vp @ rot.T + 7)
-    np.testing.assert_allclose(n1, n0 @ rot.T, atol=1e-6)
-    np.testing.assert_allclose(c1, c0, atol=1e-9)
+    np.testing.assert_allclose(n1, n0 @ rot.T, atol=1e-4)
+    np.testing.assert_allclose(c1, c0, atol=1e-5)
 
 
 def test_estimator_layout():
