@@ -4,12 +4,20 @@ import pytest
 from sklearn.utils import estimator_checks as sk
 
 from skpcd.datasets import make_point_clouds, make_urban_objects
-from skpcd.features import ShapeFeatures
+from skpcd.features import FPFHTransformer, PFHTransformer, ShapeFeatures
+from skpcd.preprocessing import NormalEstimator
 from skpcd.utils.estimator_checks import ragged_checks
 
 # Estimators taking a list of clouds as X; those taking 2-D X go through
 # sklearn's parametrize_with_checks instead.
-RAGGED = [ShapeFeatures()]
+RAGGED = [
+    ShapeFeatures(),
+    NormalEstimator(n_neighbors=8),
+    PFHTransformer(n_neighbors=8),
+    FPFHTransformer(n_neighbors=8),
+    PFHTransformer(radius=0.3, pooling="mean", undefined="drop"),
+    FPFHTransformer(n_neighbors=8, convention="open3d", pooling="max"),
+]
 
 # sklearn checks that need no data and therefore apply to ragged estimators.
 DATA_FREE_CHECKS = [
