@@ -29,12 +29,12 @@ fields keep their type (booleans become ``U 1``); ``normals`` is written as
 c``. The cloud is written unorganized (``HEIGHT 1``).
 """
 
-import io
 import re
 
 import numpy as np
 
 from skpcd.exceptions import PointCloudFileError
+from skpcd.io._common import ascii_rows, float_format, is_float32_exact
 from skpcd.io._lzf import LZFError, lzf_compress, lzf_decompress_array
 
 _ENCODINGS = ("ascii", "binary", "binary_compressed")
@@ -393,15 +393,10 @@ def read(path):
     return fields, info
 
 
-def _is_float32_exact(values):
-    with np.errstate(over="ignore", invalid="ignore"):
-        return np.array_equal(values.astype(np.float32), values, equal_nan=True)
-
-
 def _columns(fields):
     """``(name, values, TYPE, SIZE, COUNT)`` for each PCD field to write."""
     coords = [np.asarray(fields[c], dtype=np.float64) for c in "xyz"]
-    coord_type = np.float32 if all(_is_float32_exact(v) for v in coords) else np.float64
+    coord_type = np.float32 if all(is_float32_exact(v) for v in coords) else np.float64
     columns = [(c, v.astype(coord_type)) for c, v in zip("xyz", coords, strict=True)]
     for name, values in fields.items():
         if name in ("x", "y", "z"):
@@ -453,20 +448,13 @@ def _header(columns, n, encoding):
 
 def _ascii_body(columns, n):
     formats, flat = [], []
-    for name, values, kind, size, count in columns:
+    for _, values, kind, size, count in columns:
         block = values.reshape(n, count)
-        if kind == "F":
-            fmt = "%.9g" if size == 4 else "%.17g"
-        else:
-            fmt = "%d"
+        fmt = float_format(size) if kind == "F" else "%d"
         for j in range(count):
             formats.append(fmt)
-            flat.append(block[:, j].tolist())
-    line = " ".join(formats) + "\n"
-    out = io.StringIO()
-    for row in zip(*flat, strict=True):
-        out.write(line % row)
-    return out.getvalue().encode("ascii")
+            flat.append(block[:, j])
+    return ascii_rows(formats, flat)
 
 
 def write(path, fields, *, encoding="binary"):

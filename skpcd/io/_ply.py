@@ -29,12 +29,12 @@ integer type (64-bit integers need values within 32 bits: PLY has no 64-bit
 type); booleans become ``uchar``.
 """
 
-import io
 import re
 
 import numpy as np
 
 from skpcd.exceptions import PointCloudFileError
+from skpcd.io._common import ascii_rows, float_format, is_float32_exact
 
 _TYPES = {
     "char": "i1",
@@ -411,11 +411,6 @@ def read(path):
     return fields, info
 
 
-def _is_float32_exact(values):
-    with np.errstate(over="ignore", invalid="ignore"):
-        return np.array_equal(values.astype(np.float32), values, equal_nan=True)
-
-
 def _storable(name, values):
     """``values`` in a dtype PLY has."""
     dtype = values.dtype
@@ -442,7 +437,7 @@ def _storable(name, values):
 def _columns(fields):
     """``[(property name, 1-D values)]`` in the order to write them."""
     coords = [np.asarray(fields[c], dtype=np.float64) for c in "xyz"]
-    coord_type = np.float32 if all(_is_float32_exact(v) for v in coords) else np.float64
+    coord_type = np.float32 if all(is_float32_exact(v) for v in coords) else np.float64
     columns = [(c, v.astype(coord_type)) for c, v in zip("xyz", coords, strict=True)]
     for name, values in fields.items():
         if name in ("x", "y", "z"):
@@ -471,18 +466,11 @@ def _columns(fields):
 
 
 def _ascii_body(columns):
-    formats, flat = [], []
-    for _, values in columns:
-        if values.dtype.kind == "f":
-            formats.append("%.9g" if values.dtype.itemsize == 4 else "%.17g")
-        else:
-            formats.append("%d")
-        flat.append(values.tolist())
-    line = " ".join(formats) + "\n"
-    out = io.StringIO()
-    for row in zip(*flat, strict=True):
-        out.write(line % row)
-    return out.getvalue().encode("ascii")
+    formats = [
+        float_format(v.dtype.itemsize) if v.dtype.kind == "f" else "%d"
+        for _, v in columns
+    ]
+    return ascii_rows(formats, [v for _, v in columns])
 
 
 def write(path, fields, *, encoding="binary"):
