@@ -26,7 +26,7 @@ html_static_path = ["_static"]
 html_theme_options = {"navigation_with_keys": False}
 
 autosummary_generate = True
-autodoc_default_options = {"members": True, "inherited-members": True}
+autodoc_default_options = {"members": True}
 numpydoc_show_class_members = False
 numpydoc_class_members_toctree = False
 
