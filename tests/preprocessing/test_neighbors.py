@@ -40,9 +40,7 @@ def test_duplicates_keep_query_first():
 
 
 def test_small_cloud_and_errors():
-    nb = compute_neighborhoods(
-        np.array([[0, 0, 0], [1, 0, 0.0]]), n_neighbors=10
-    )
+    nb = compute_neighborhoods(np.array([[0, 0, 0], [1, 0, 0.0]]), n_neighbors=10)
     assert nb.sizes.tolist() == [2, 2]
     with pytest.raises(ValueError, match="exactly one"):
         compute_neighborhoods(np.zeros((3, 3)))
