@@ -34,14 +34,31 @@ def pair_features(p1, n1, p2, n2):
     ``p1, n1, p2, n2`` are float32 arrays of 3 values. A zero distance or a
     zero ``v`` gives (0, 0, 0, 0), which PCL bins like a regular pair.
     """
-    dx = p2[0] - p1[0]
-    dy = p2[1] - p1[1]
-    dz = p2[2] - p1[2]
+    points = np.empty((2, 3), dtype=np.float32)
+    normals = np.empty((2, 3), dtype=np.float32)
+    for c in range(3):
+        points[0, c], points[1, c] = p1[c], p2[c]
+        normals[0, c], normals[1, c] = n1[c], n2[c]
+    return pair_features_at(points, normals, 0, 1)
+
+
+@njit(cache=True, nogil=True)
+def pair_features_at(points, normals, i, j):
+    """:func:`pair_features` of rows ``i`` (first) and ``j`` of the arrays.
+
+    Reads the rows in place: array views in the hot loop would cost an
+    atomic reference-count update each, which serialises the threads.
+    """
+    dx = points[j, 0] - points[i, 0]
+    dy = points[j, 1] - points[i, 1]
+    dz = points[j, 2] - points[i, 2]
     f4 = np.float32(math.sqrt(_dot(dx, dy, dz, dx, dy, dz)))
     if f4 == F0:
         return F0, F0, F0, F0
-    a1 = _dot(n1[0], n1[1], n1[2], dx, dy, dz) / f4
-    a2 = _dot(n2[0], n2[1], n2[2], dx, dy, dz) / f4
+    n1x, n1y, n1z = normals[i, 0], normals[i, 1], normals[i, 2]
+    n2x, n2y, n2z = normals[j, 0], normals[j, 1], normals[j, 2]
+    a1 = _dot(n1x, n1y, n1z, dx, dy, dz) / f4
+    a2 = _dot(n2x, n2y, n2z, dx, dy, dz) / f4
     b1 = abs(a1)
     b2 = abs(a2)
     if b1 + _SWAP_MARGIN < b2:
@@ -52,13 +69,13 @@ def pair_features(p1, n1, p2, n2):
     else:
         swap = math.acos(b1) > math.acos(b2)
     if swap:
-        ux, uy, uz = n2[0], n2[1], n2[2]
-        tx, ty, tz = n1[0], n1[1], n1[2]
+        ux, uy, uz = n2x, n2y, n2z
+        tx, ty, tz = n1x, n1y, n1z
         dx, dy, dz = -dx, -dy, -dz
         f3 = -a2
     else:
-        ux, uy, uz = n1[0], n1[1], n1[2]
-        tx, ty, tz = n2[0], n2[1], n2[2]
+        ux, uy, uz = n1x, n1y, n1z
+        tx, ty, tz = n2x, n2y, n2z
         f3 = a1
     # v = d x u (Eigen cross3), normalised
     vx = dy * uz - dz * uy
@@ -111,7 +128,7 @@ def pfh_point(points, normals, neighbors, n_bins, out):
         i = neighbors[a]
         for b in range(a):
             j = neighbors[b]
-            f1, f2, f3, _ = pair_features(points[i], normals[i], points[j], normals[j])
+            f1, f2, f3, _ = pair_features_at(points, normals, i, j)
             h = (
                 _bin_angle(f1, n_bins)
                 + n_bins * _bin_cosine(f2, n_bins)
@@ -144,7 +161,7 @@ def spfh(points, normals, indptr, indices, n_bins):
             j = indices[t]
             if j == i:
                 continue
-            f1, f2, f3, _ = pair_features(points[i], normals[i], points[j], normals[j])
+            f1, f2, f3, _ = pair_features_at(points, normals, i, j)
             out[i, _bin_angle(f1, n_bins)] += incr
             out[i, n_bins + _bin_cosine(f2, n_bins)] += incr
             out[i, 2 * n_bins + _bin_cosine(f3, n_bins)] += incr
