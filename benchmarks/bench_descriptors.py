@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent
-DEFAULT_DATA = "/work/shared/data/dales_objects"
+DEFAULT_DATA = ROOT.parents[1] / "shared" / "data" / "dales_objects"
 DEFAULT_PCL = ROOT / "pcl_reference" / "build" / "pcl_reference"
 N_TILES = 3
 RADIUS = 0.9
@@ -282,14 +282,11 @@ def _worker_open3d(spec, clouds):
 
 def _worker_profile(spec, clouds):
     """skpcd's stages, timed one by one the way the transformers chain them."""
-    from scipy.spatial import cKDTree
-
     from skpcd.features import FPFHTransformer, PFHTransformer
-    from skpcd.features import _pfh_kernels as kern
-    from skpcd.preprocessing import compute_neighborhoods
-    from skpcd.preprocessing._normals import _normals_packed, pack_neighborhoods
+    from skpcd.features._pfh import _fpfh_packed, _pfh_packed
+    from skpcd.preprocessing._neighbors import search_packed
+    from skpcd.preprocessing._normals import _normals_f32, pack_neighborhoods
     from skpcd.utils import check_point_clouds
-    from skpcd.utils._parallel import numba_threads
 
     nj = spec["threads"]
     search = spec["search"]
@@ -298,9 +295,8 @@ def _worker_profile(spec, clouds):
     rng = np.random.default_rng(0)
     small = [rng.random((300, 3)) * 3]
     cls(n_jobs=nj, undefined="keep", **kw).fit_transform(small)
-    t = {}
 
-    def tick(name, w0):
+    def tick(t, name, w0):
         t[name] = t.get(name, 0.0) + time.perf_counter() - w0
         return time.perf_counter()
 
@@ -312,55 +308,23 @@ def _worker_profile(spec, clouds):
         t["total_transformer"] = time.perf_counter() - w
         # the same steps as _LocalDescriptor._compute + transform
         w = time.perf_counter()
-        cs = check_point_clouds(clouds, ensure_all_finite=False)
-        for c in cs:
-            np.isfinite(c[:, :3]).all()
-        w = tick("validate", w)
-        xyz, offsets, nb = pack_neighborhoods(cs, n_jobs=nj, **kw)
-        w = tick("pack_neighborhoods", w)
-        normals, _ = _normals_packed(xyz, nb, np.zeros(3), nj)
-        w = tick("normals (kernel + float64 copies)", w)
+        cs = check_point_clouds(clouds)
+        w = tick(t, "validate", w)
+        xyz, offsets, nb = pack_neighborhoods(cs, n_jobs=nj, with_sqdist=False, **kw)
+        w = tick(t, "pack + neighbour search", w)
         p = xyz.astype(np.float32)
-        n = normals.astype(np.float32)
-        ~np.isfinite(n).all(axis=1) | (nb.sizes < 2)
-        w = tick("float32 casts + undefined mask", w)
-        with numba_threads(nj):
-            if spec["desc"] == "pfh":
-                out = kern.pfh(p, n, nb.indptr, nb.indices, 5)
-                w = tick("pfh kernel", w)
-            else:
-                s = kern.spfh(p, n, nb.indptr, nb.indices, 11)
-                w = tick("spfh kernel", w)
-                out = kern.fpfh_pcl(s, nb.indptr, nb.indices, nb.sqdist, 11)
-                w = tick("fpfh_pcl kernel", w)
-                del s
-        [out[offsets[i] : offsets[i + 1]] for i in range(len(offsets) - 1)]
-        w = tick("split rows", w)
+        n, _ = _normals_f32(p, nb, np.zeros(3), nj)
+        w = tick(t, "normals", w)
+        if spec["desc"] == "pfh":
+            out = _pfh_packed(p, n, nb, 5, nj)
+        else:
+            out = _fpfh_packed(p, n, nb, 11, "pcl", nj)
+        w = tick(t, "descriptor kernels", w)
         del out
-        # inside pack_neighborhoods: the per-cloud searches and their parts
-        w = time.perf_counter()
-        for c in cs:
-            compute_neighborhoods(c, n_jobs=nj, **kw)
-        t["  compute_neighborhoods (all clouds)"] = time.perf_counter() - w
-        tb = tq = 0.0
-        for c in cs:
-            x = np.ascontiguousarray(c[:, :3], dtype=np.float64)
+        for algorithm in ("grid", "kd_tree"):
             w = time.perf_counter()
-            tree = cKDTree(x)
-            tb += time.perf_counter() - w
-            w = time.perf_counter()
-            if "radius" in kw:
-                cnt = tree.query_ball_point(
-                    x, r=kw["radius"], workers=nj, return_length=True
-                )
-                tree.query(
-                    x, k=int(cnt.max()), distance_upper_bound=kw["radius"], workers=nj
-                )
-            else:
-                tree.query(x, k=min(K, len(x)), workers=nj)
-            tq += time.perf_counter() - w
-        t["    cKDTree build"] = tb
-        t["    cKDTree query"] = tq
+            search_packed(xyz, offsets, n_jobs=nj, algorithm=algorithm, **kw)
+            tick(t, f"  search alone, {algorithm}", w)
         all_runs.append(t)
     # each stage's best over the repeats
     best = {k: min(r[k] for r in all_runs) for k in all_runs[0]}

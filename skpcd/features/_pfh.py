@@ -16,11 +16,11 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from skpcd.preprocessing._neighbors import Neighborhoods, compute_neighborhoods
 from skpcd.preprocessing._normals import (
     _check_viewpoint,
-    _normals_packed,
+    _normals_f32,
     pack_neighborhoods,
 )
 from skpcd.utils import check_point_clouds
-from skpcd.utils._parallel import numba_threads
+from skpcd.utils._parallel import parallel_rows
 
 __all__ = ["FPFHTransformer", "PFHTransformer", "compute_fpfh", "compute_pfh"]
 
@@ -85,22 +85,59 @@ def compute_pfh(
     """
     nb = _neighborhoods(points, neighborhoods, n_neighbors, radius, n_jobs)
     p, n = _as_f32(points, normals, nb)
-    from skpcd.features._pfh_kernels import pfh
-
-    with numba_threads(n_jobs):
-        return pfh(p, n, nb.indptr, nb.indices, int(n_bins))
+    return _pfh_packed(p, n, nb, int(n_bins), n_jobs)
 
 
-def _fpfh_packed(p, n, nb, n_bins, convention):
+def _pfh_packed(p, n, nb, n_bins, n_jobs):
+    """PFH kernel over float32 packed arrays."""
+    from skpcd.features._pfh_kernels import pfh_rows
+
+    out = np.zeros((len(p), n_bins**3), dtype=np.float32)
+    parallel_rows(pfh_rows, len(p), n_jobs, p, n, nb.indptr, nb.indices, n_bins, out)
+    return out
+
+
+# Pair counts up to this many are turned into PCL's sums by table lookup.
+_TABLE_PAIRS = 255
+
+
+def _spfh_counts(p, n, nb, n_bins, n_jobs):
+    """SPFH as pair counts per bin, and the table of PCL's increment sums.
+
+    One byte per bin (two above 255 neighbours), not a float32's four.
+    """
     from skpcd.features import _pfh_kernels as k
 
-    s = k.spfh(p, n, nb.indptr, nb.indices, n_bins)
-    if convention == "paper":
-        return k.fpfh_paper(s, nb.indptr, nb.indices, nb.sqdist).astype(np.float32)
-    out = k.fpfh_pcl(s, nb.indptr, nb.indices, nb.sqdist, n_bins)
-    if convention == "open3d":
-        out += s
+    max_pairs = max(int(nb.sizes.max(initial=1)) - 1, 1)
+    dtype = (
+        np.uint8 if max_pairs <= 255 else np.uint16 if max_pairs < 2**16 else np.uint32
+    )
+    counts = np.zeros((len(p), 3 * n_bins), dtype=dtype)
+    args = (p, n, nb.indptr, nb.indices, n_bins, counts)
+    parallel_rows(k.spfh_rows, len(p), n_jobs, *args)
+    return counts, k.increment_sums(min(max_pairs, _TABLE_PAIRS))
+
+
+def _spfh(p, n, nb, n_bins, n_jobs=None):
+    """SPFH of every point as PCL's float32 values, (n, 3 * n_bins)."""
+    from skpcd.features._pfh_kernels import spfh_values
+
+    counts, table = _spfh_counts(p, n, nb, n_bins, n_jobs)
+    out = np.empty(counts.shape, dtype=np.float32)
+    parallel_rows(spfh_values, len(p), n_jobs, counts, nb.indptr, table, out)
     return out
+
+
+def _fpfh_packed(p, n, nb, n_bins, convention, n_jobs):
+    """SPFH (as pair counts) then FPFH kernels over float32 packed arrays."""
+    from skpcd.features._pfh_kernels import fpfh_rows
+
+    counts, table = _spfh_counts(p, n, nb, n_bins, n_jobs)
+    mode = FPFH_CONVENTIONS.index(convention)
+    out = np.zeros((len(p), 3 * n_bins), dtype=np.float64 if mode == 2 else np.float32)
+    args = (p, counts, nb.indptr, nb.indices, table, n_bins, mode, out)
+    parallel_rows(fpfh_rows, len(p), n_jobs, *args)
+    return out.astype(np.float32, copy=False)
 
 
 def compute_fpfh(
@@ -151,8 +188,7 @@ def compute_fpfh(
         )
     nb = _neighborhoods(points, neighborhoods, n_neighbors, radius, n_jobs)
     p, n = _as_f32(points, normals, nb)
-    with numba_threads(n_jobs):
-        return _fpfh_packed(p, n, nb, int(n_bins), convention)
+    return _fpfh_packed(p, n, nb, int(n_bins), convention, n_jobs)
 
 
 class _LocalDescriptor(TransformerMixin, BaseEstimator):
@@ -224,10 +260,12 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         if k is None and self.radius is None:
             k = self._default_n_neighbors
         xyz, offsets, nb = pack_neighborhoods(
-            clouds, n_neighbors=k, radius=self.radius, n_jobs=self.n_jobs
-        )
+            clouds, n_neighbors=k, radius=self.radius, n_jobs=self.n_jobs,
+            with_sqdist=False,
+        )  # fmt: skip
+        p = xyz.astype(np.float32)
         if self.normals == "columns":
-            normals = np.vstack([c[:, 3:6] for c in clouds]).astype(np.float64)
+            n = np.vstack([c[:, 3:6] for c in clouds]).astype(np.float32)
         else:
             nnb = nb
             if self.normal_n_neighbors is not None or self.normal_radius is not None:
@@ -236,14 +274,14 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
                     n_neighbors=self.normal_n_neighbors,
                     radius=self.normal_radius,
                     n_jobs=self.n_jobs,
+                    with_sqdist=False,
                 )
             vp = _check_viewpoint(self.viewpoint)
-            normals, _ = _normals_packed(xyz, nnb, vp, self.n_jobs)
-        p = xyz.astype(np.float32)
-        n = normals.astype(np.float32)
+            n = _normals_f32(p, nnb, vp, self.n_jobs)[0]
+            del nnb
+        del xyz  # the descriptors work in float32
         undefined = ~np.isfinite(n).all(axis=1) | (nb.sizes < 2)
-        with numba_threads(self.n_jobs):
-            out = self._kernel(p, n, nb)
+        out = self._kernel(p, n, nb)
         return out, undefined, offsets
 
     def undefined_mask(self, X):
@@ -430,9 +468,7 @@ class PFHTransformer(_LocalDescriptor):
         self.n_jobs = n_jobs
 
     def _kernel(self, p, n, nb):
-        from skpcd.features._pfh_kernels import pfh
-
-        return pfh(p, n, nb.indptr, nb.indices, int(self.n_bins))
+        return _pfh_packed(p, n, nb, int(self.n_bins), self.n_jobs)
 
 
 class FPFHTransformer(_LocalDescriptor):
@@ -509,4 +545,4 @@ class FPFHTransformer(_LocalDescriptor):
         self.n_jobs = n_jobs
 
     def _kernel(self, p, n, nb):
-        return _fpfh_packed(p, n, nb, int(self.n_bins), self.convention)
+        return _fpfh_packed(p, n, nb, int(self.n_bins), self.convention, self.n_jobs)

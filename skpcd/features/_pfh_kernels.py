@@ -10,7 +10,7 @@ See ``docs/user_guide/local_descriptors.rst`` for the conventions.
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 F0 = np.float32(0.0)
 F100 = np.float32(100.0)
@@ -34,29 +34,25 @@ def pair_features(p1, n1, p2, n2):
     ``p1, n1, p2, n2`` are float32 arrays of 3 values. A zero distance or a
     zero ``v`` gives (0, 0, 0, 0), which PCL bins like a regular pair.
     """
-    points = np.empty((2, 3), dtype=np.float32)
-    normals = np.empty((2, 3), dtype=np.float32)
-    for c in range(3):
-        points[0, c], points[1, c] = p1[c], p2[c]
-        normals[0, c], normals[1, c] = n1[c], n2[c]
-    return pair_features_at(points, normals, 0, 1)
+    return _pair(
+        p1[0], p1[1], p1[2], n1[0], n1[1], n1[2],
+        p2[0], p2[1], p2[2], n2[0], n2[1], n2[2],
+    )  # fmt: skip
 
 
 @njit(cache=True, nogil=True)
-def pair_features_at(points, normals, i, j):
-    """:func:`pair_features` of rows ``i`` (first) and ``j`` of the arrays.
+def _pair(p1x, p1y, p1z, n1x, n1y, n1z, p2x, p2y, p2z, n2x, n2y, n2z):
+    """:func:`pair_features` on scalars.
 
-    Reads the rows in place: array views in the hot loop would cost an
-    atomic reference-count update each, which serialises the threads.
+    Kernels read the rows and pass scalars: a function taking arrays would
+    cost atomic reference-count updates at every call.
     """
-    dx = points[j, 0] - points[i, 0]
-    dy = points[j, 1] - points[i, 1]
-    dz = points[j, 2] - points[i, 2]
+    dx = p2x - p1x
+    dy = p2y - p1y
+    dz = p2z - p1z
     f4 = np.float32(math.sqrt(_dot(dx, dy, dz, dx, dy, dz)))
     if f4 == F0:
         return F0, F0, F0, F0
-    n1x, n1y, n1z = normals[i, 0], normals[i, 1], normals[i, 2]
-    n2x, n2y, n2z = normals[j, 0], normals[j, 1], normals[j, 2]
     a1 = _dot(n1x, n1y, n1z, dx, dy, dz) / f4
     a2 = _dot(n2x, n2y, n2z, dx, dy, dz) / f4
     b1 = abs(a1)
@@ -117,77 +113,147 @@ def _bin_cosine(f, n_bins):
 
 
 @njit(cache=True, nogil=True)
-def pfh_point(points, normals, neighbors, n_bins, out):
-    """PFH of one neighbourhood (point first), accumulated into ``out``."""
-    m = len(neighbors)
-    n_pairs = (m * (m - 1)) // 2
-    if n_pairs == 0:
-        return
-    incr = F100 / np.float32(n_pairs)
-    for a in range(m):
-        i = neighbors[a]
-        for b in range(a):
-            j = neighbors[b]
-            f1, f2, f3, _ = pair_features_at(points, normals, i, j)
-            h = (
-                _bin_angle(f1, n_bins)
-                + n_bins * _bin_cosine(f2, n_bins)
-                + n_bins * n_bins * _bin_cosine(f3, n_bins)
-            )
-            out[h] += incr
+def pfh_rows(lo, hi, points, normals, indptr, indices, n_bins, out):
+    """PFH of points ``lo`` to ``hi`` into the zeroed rows of ``out``.
 
-
-@njit(cache=True, nogil=True, parallel=True)
-def pfh(points, normals, indptr, indices, n_bins):
-    """PFH of every point: (n, n_bins**3) float32, PCL's layout (f1 fastest)."""
-    n = len(indptr) - 1
-    out = np.zeros((n, n_bins**3), dtype=np.float32)
-    for i in prange(n):
-        pfh_point(points, normals, indices[indptr[i] : indptr[i + 1]], n_bins, out[i])
-    return out
-
-
-@njit(cache=True, nogil=True, parallel=True)
-def spfh(points, normals, indptr, indices, n_bins):
-    """SPFH of every point: (n, 3 * n_bins) float32, blocks [f1 | f2 | f3]."""
-    n = len(indptr) - 1
-    out = np.zeros((n, 3 * n_bins), dtype=np.float32)
-    for i in prange(n):
+    Pairs run as in PCL: for each neighbour ``a`` (the point first), with
+    every earlier neighbour ``b``, ``a`` is the first point of the pair.
+    Layout ``(n, n_bins**3)``, f1 fastest.
+    """
+    for i in range(lo, hi):
         start, stop = indptr[i], indptr[i + 1]
-        if stop - start < 2:
+        n_pairs = ((stop - start) * (stop - start - 1)) // 2
+        if n_pairs == 0:
             continue
-        incr = F100 / np.float32(stop - start - 1)
+        incr = F100 / np.float32(n_pairs)
+        for a in range(start, stop):
+            ia = indices[a]
+            pax, pay, paz = points[ia, 0], points[ia, 1], points[ia, 2]
+            nax, nay, naz = normals[ia, 0], normals[ia, 1], normals[ia, 2]
+            for b in range(start, a):
+                ib = indices[b]
+                f1, f2, f3, _ = _pair(
+                    pax, pay, paz, nax, nay, naz,
+                    points[ib, 0], points[ib, 1], points[ib, 2],
+                    normals[ib, 0], normals[ib, 1], normals[ib, 2],
+                )  # fmt: skip
+                h = (
+                    _bin_angle(f1, n_bins)
+                    + n_bins * _bin_cosine(f2, n_bins)
+                    + n_bins * n_bins * _bin_cosine(f3, n_bins)
+                )
+                out[i, h] += incr
+
+
+@njit(cache=True, nogil=True)
+def spfh_rows(lo, hi, points, normals, indptr, indices, n_bins, counts):
+    """SPFH of points ``lo`` to ``hi`` as pair counts per bin.
+
+    ``counts`` (n, 3 * n_bins), blocks ``[f1 | f2 | f3]``, zeroed, of an
+    unsigned type wide enough for the largest neighbourhood. PCL adds
+    ``100 / n_pairs`` once per pair; :func:`spfh_values` turns counts into
+    those sums exactly. The point is the first of each pair.
+    """
+    for i in range(lo, hi):
+        start, stop = indptr[i], indptr[i + 1]
+        pix, piy, piz = points[i, 0], points[i, 1], points[i, 2]
+        nix, niy, niz = normals[i, 0], normals[i, 1], normals[i, 2]
         for t in range(start, stop):
             j = indices[t]
             if j == i:
                 continue
-            f1, f2, f3, _ = pair_features_at(points, normals, i, j)
-            out[i, _bin_angle(f1, n_bins)] += incr
-            out[i, n_bins + _bin_cosine(f2, n_bins)] += incr
-            out[i, 2 * n_bins + _bin_cosine(f3, n_bins)] += incr
-    return out
+            f1, f2, f3, _ = _pair(
+                pix, piy, piz, nix, niy, niz,
+                points[j, 0], points[j, 1], points[j, 2],
+                normals[j, 0], normals[j, 1], normals[j, 2],
+            )  # fmt: skip
+            counts[i, _bin_angle(f1, n_bins)] += 1
+            counts[i, n_bins + _bin_cosine(f2, n_bins)] += 1
+            counts[i, 2 * n_bins + _bin_cosine(f3, n_bins)] += 1
 
 
-@njit(cache=True, nogil=True, parallel=True)
-def fpfh_pcl(spfh_hist, indptr, indices, sqdist, n_bins):
-    """PCL's FPFH: sum of neighbours' SPFH weighted by 1/squared distance.
+def increment_sums(max_pairs):
+    """``table[p, c]``: ``100 / p`` added ``c`` times in float32, as PCL does.
 
-    Neighbours at distance 0 (the point itself and duplicates) are left out;
-    each block is rescaled to sum to 100 (scale in double, product in float).
+    Parameters
+    ----------
+    max_pairs : int
+        Largest number of pairs tabulated.
+
+    Returns
+    -------
+    table : ndarray of shape (max_pairs + 1, max_pairs + 1), float32
     """
-    n = len(indptr) - 1
+    table = np.zeros((max_pairs + 1, max_pairs + 1), dtype=np.float32)
+    for p in range(1, max_pairs + 1):
+        incr = np.float32(100.0) / np.float32(p)
+        # add.accumulate is sequential, in float32: PCL's repeated +=
+        table[p, 1 : p + 1] = np.cumsum(np.full(p, incr, dtype=np.float32))
+    return table
+
+
+@njit(cache=True, nogil=True)
+def _spfh_value(table, n_pairs, c):
+    if c == 0:
+        return F0
+    if n_pairs < len(table):
+        return table[n_pairs, c]
+    incr = F100 / np.float32(n_pairs)
+    acc = F0
+    for _ in range(c):
+        acc += incr
+    return acc
+
+
+@njit(cache=True, nogil=True)
+def spfh_values(lo, hi, counts, indptr, table, out):
+    """Rows ``lo`` to ``hi`` of the SPFH as PCL's float32 values."""
+    for i in range(lo, hi):
+        n_pairs = indptr[i + 1] - indptr[i] - 1
+        for b in range(counts.shape[1]):
+            out[i, b] = _spfh_value(table, n_pairs, counts[i, b])
+
+
+@njit(cache=True, nogil=True)
+def _sqdist32(points, i, j):
+    """FLANN's ``L2_Simple`` in float32: ((0 + dx**2) + dy**2) + dz**2."""
+    dx = points[i, 0] - points[j, 0]
+    dy = points[i, 1] - points[j, 1]
+    dz = points[i, 2] - points[j, 2]
+    return (dx * dx + dy * dy) + dz * dz
+
+
+@njit(cache=True, nogil=True)
+def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out):
+    """FPFH of points ``lo`` to ``hi`` into the zeroed rows of ``out``.
+
+    ``mode`` 0, PCL: the neighbours' SPFH weighted by 1/squared distance
+    (float32, as FLANN computes it), neighbours at distance 0 (the point and
+    its duplicates) left out, each block rescaled to sum to 100 (scale in
+    double, product in float). Mode 1, Open3D: the same plus the point's own
+    SPFH. Mode 2, Rusu et al. (2009): SPFH(p) + (1/k) sum SPFH(q) / d in
+    float64 (``out`` float64), k counting the neighbours at a non-zero
+    distance, not rescaled.
+    """
     width = 3 * n_bins
-    out = np.zeros((n, width), dtype=np.float32)
-    for i in prange(n):
+    for i in range(lo, hi):
         s1 = s2 = s3 = 0.0
+        k = 0
         for t in range(indptr[i], indptr[i + 1]):
-            d = sqdist[t]
+            j = indices[t]
+            d = _sqdist32(points, i, j)
             if d == F0:
                 continue
+            k += 1
+            n_pairs = indptr[j + 1] - indptr[j] - 1
+            if mode == 2:
+                w64 = 1.0 / math.sqrt(np.float64(d))
+                for b in range(width):
+                    out[i, b] += _spfh_value(table, n_pairs, counts[j, b]) * w64
+                continue
             weight = np.float32(1.0) / d
-            j = indices[t]
             for b in range(width):
-                val = spfh_hist[j, b] * weight
+                val = _spfh_value(table, n_pairs, counts[j, b]) * weight
                 if b < n_bins:
                     s1 += val
                 elif b < 2 * n_bins:
@@ -195,6 +261,13 @@ def fpfh_pcl(spfh_hist, indptr, indices, sqdist, n_bins):
                 else:
                     s3 += val
                 out[i, b] += val
+        n_own = indptr[i + 1] - indptr[i] - 1
+        if mode == 2:
+            for b in range(width):
+                if k > 0:
+                    out[i, b] /= k
+                out[i, b] += _spfh_value(table, n_own, counts[i, b])
+            continue
         k1 = np.float32(100.0 / s1) if s1 != 0.0 else np.float32(s1)
         k2 = np.float32(100.0 / s2) if s2 != 0.0 else np.float32(s2)
         k3 = np.float32(100.0 / s3) if s3 != 0.0 else np.float32(s3)
@@ -205,31 +278,5 @@ def fpfh_pcl(spfh_hist, indptr, indices, sqdist, n_bins):
                 out[i, b] *= k2
             else:
                 out[i, b] *= k3
-    return out
-
-
-@njit(cache=True, nogil=True, parallel=True)
-def fpfh_paper(spfh_hist, indptr, indices, sqdist):
-    """Rusu et al. (2009): SPFH(p) + (1/k) sum SPFH(q) / ||p - q||.
-
-    k counts the neighbours at a non-zero distance; nothing is rescaled.
-    Computed in float64.
-    """
-    n = len(indptr) - 1
-    width = spfh_hist.shape[1]
-    out = np.zeros((n, width), dtype=np.float64)
-    for i in prange(n):
-        k = 0
-        for t in range(indptr[i], indptr[i + 1]):
-            if sqdist[t] == F0:
-                continue
-            k += 1
-            weight = 1.0 / math.sqrt(np.float64(sqdist[t]))
-            j = indices[t]
-            for b in range(width):
-                out[i, b] += spfh_hist[j, b] * weight
-        for b in range(width):
-            if k > 0:
-                out[i, b] /= k
-            out[i, b] += spfh_hist[i, b]
-    return out
+            if mode == 1:
+                out[i, b] += _spfh_value(table, n_own, counts[i, b])

@@ -1,8 +1,14 @@
 """Neighbourhoods as CSR arrays, computed once and shared by normals and descriptors.
 
 A neighbourhood of point ``i`` is ``indices[indptr[i]:indptr[i + 1]]``, sorted
-by distance, with the point itself first (at distance 0), as PCL's k-d tree
-returns it. ``sqdist`` holds the squared distances, float32 as in PCL.
+by distance (ties by index), with the point itself first (at distance 0), as
+PCL's k-d tree returns it. ``sqdist`` holds the squared distances, float32 as
+in PCL.
+
+Two search algorithms give the same neighbourhoods: ``"grid"``, numba kernels
+on a hashed voxel grid (:mod:`skpcd.preprocessing._grid_kernels`), and
+``"kd_tree"``, :class:`scipy.spatial.cKDTree` with parallel queries. Both
+take several clouds packed one after the other and never cross clouds.
 """
 
 from dataclasses import dataclass
@@ -10,10 +16,16 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from skpcd.utils._parallel import effective_threads, parallel_rows
+
 __all__ = ["Neighborhoods", "compute_neighborhoods"]
 
-# Radius queries run in chunks so that the padded k-NN buffer stays small.
-_CHUNK = 16384
+ALGORITHMS = ("auto", "grid", "kd_tree")
+# Target number of points per occupied cell for k-nearest searches, as a
+# fraction of k: the 27 cells around a point then hold its k nearest.
+_OCCUPANCY = 0.4
+# Shells of cells a k-nearest query may scan before the k-d tree takes over.
+_MAX_SHELL = 3
 
 
 @dataclass(frozen=True)
@@ -59,13 +71,13 @@ def _check_points(points):
     return xyz
 
 
-def compute_neighborhoods(points, *, n_neighbors=None, radius=None, n_jobs=None):
+def compute_neighborhoods(
+    points, *, n_neighbors=None, radius=None, n_jobs=None, algorithm="auto"
+):
     """Find the k nearest neighbours or the radius neighbours of every point.
 
     Exactly one of ``n_neighbors`` and ``radius`` is given, as in PCL's
-    ``setKSearch``/``setRadiusSearch``. The search uses
-    :class:`scipy.spatial.cKDTree` with parallel queries; memory is
-    O(n_points * neighbours).
+    ``setKSearch``/``setRadiusSearch``. Memory is O(n_points * neighbours).
 
     Parameters
     ----------
@@ -78,6 +90,12 @@ def compute_neighborhoods(points, *, n_neighbors=None, radius=None, n_jobs=None)
         Search radius, inclusive (``distance <= radius``).
     n_jobs : int, default=None
         Threads for the queries; None means 1, -1 all cores.
+    algorithm : {"auto", "grid", "kd_tree"}, default="auto"
+        ``"grid"``: exact search on a hashed voxel grid (numba), several
+        times faster than a k-d tree on LiDAR clouds; ``"kd_tree"``:
+        :class:`scipy.spatial.cKDTree`. ``"auto"`` is ``"grid"``. Both give
+        the same neighbourhoods, except which of several points tied at the
+        k-th distance is kept.
 
     Returns
     -------
@@ -88,8 +106,8 @@ def compute_neighborhoods(points, *, n_neighbors=None, radius=None, n_jobs=None)
     -----
     Distances are computed in float64 and stored as float32. When several
     points are at the same distance (coordinates quantised to a centimetre
-    make this common), the neighbour kept at the k-th place may differ from
-    PCL's FLANN tree; see the user guide.
+    make this common), the lowest index comes first and is the one kept at
+    the k-th place; PCL's FLANN tree may keep another; see the user guide.
 
     Examples
     --------
@@ -99,85 +117,222 @@ def compute_neighborhoods(points, *, n_neighbors=None, radius=None, n_jobs=None)
     >>> nb.indices.reshape(4, 2).tolist()
     [[0, 1], [1, 0], [2, 1], [3, 2]]
     """
+    xyz = _check_points(points)
+    return search_packed(
+        xyz,
+        np.array([0, len(xyz)], dtype=np.int64),
+        n_neighbors=n_neighbors,
+        radius=radius,
+        n_jobs=n_jobs,
+        algorithm=algorithm,
+    )
+
+
+def _check_search(n_neighbors, radius, algorithm):
     if (n_neighbors is None) == (radius is None):
         raise ValueError("give exactly one of n_neighbors and radius")
-    xyz = _check_points(points)
-    n = len(xyz)
-    workers = _workers(n_jobs)
-    if n == 0:
+    if n_neighbors is not None and (
+        isinstance(n_neighbors, bool)
+        or int(n_neighbors) != n_neighbors
+        or n_neighbors < 1
+    ):
+        raise ValueError(f"n_neighbors must be a positive integer, got {n_neighbors}")
+    if radius is not None and not (radius > 0 and np.isfinite(radius)):
+        raise ValueError(f"radius must be positive and finite, got {radius}")
+    if algorithm not in ALGORITHMS:
+        raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
+
+
+def search_packed(
+    xyz,
+    cloud_ptr,
+    *,
+    n_neighbors=None,
+    radius=None,
+    n_jobs=None,
+    algorithm="auto",
+    with_sqdist=True,
+):
+    """Neighbourhoods of several clouds packed in one array, never crossing clouds.
+
+    Parameters
+    ----------
+    xyz : ndarray of shape (n_points, 3), float64, C-contiguous, finite
+        All points; cloud ``c`` is ``xyz[cloud_ptr[c]:cloud_ptr[c + 1]]``.
+    cloud_ptr : ndarray of shape (n_clouds + 1,), int64
+        Offsets of the clouds.
+    n_neighbors, radius, n_jobs, algorithm
+        As in :func:`compute_neighborhoods`.
+    with_sqdist : bool, default=True
+        False leaves ``sqdist`` empty (the grid search), to save memory when
+        only the indices are needed.
+
+    Returns
+    -------
+    neighborhoods : Neighborhoods
+        With indices into ``xyz``.
+    """
+    _check_search(n_neighbors, radius, algorithm)
+    cloud_ptr = np.asarray(cloud_ptr, dtype=np.int64)
+    sizes = np.diff(cloud_ptr)
+    indptr = np.zeros(len(xyz) + 1, dtype=np.int64)
+    if n_neighbors is not None:
+        counts = np.repeat(np.minimum(sizes, int(n_neighbors)), sizes)
+        np.cumsum(counts, out=indptr[1:])
+    if len(xyz) == 0:
         return Neighborhoods(
             np.zeros(1, np.int64), np.zeros(0, np.int32), np.zeros(0, np.float32)
         )
-    tree = cKDTree(xyz)
+    if algorithm == "kd_tree":
+        if n_neighbors is not None:
+            return _knn_kd_tree(xyz, cloud_ptr, indptr, None, n_jobs)
+        return _radius_kd_tree(xyz, cloud_ptr, float(radius), n_jobs)
+    from skpcd.preprocessing import _grid_kernels as g
+
+    n = len(xyz)
     if n_neighbors is not None:
-        if int(n_neighbors) != n_neighbors or n_neighbors < 1:
-            raise ValueError(
-                f"n_neighbors must be a positive integer, got {n_neighbors}"
-            )
-        k = min(int(n_neighbors), n)
-        dist, idx = tree.query(xyz, k=k, workers=workers)
-        dist, idx = dist.reshape(n, k), idx.reshape(n, k)
-        idx, dist = _self_first(idx, dist)
-        indptr = np.arange(0, n * k + 1, k, dtype=np.int64)
-        return Neighborhoods(
-            indptr, idx.astype(np.int32).ravel(), (dist.ravel() ** 2).astype(np.float32)
+        origin, h, dims, grid = _knn_grid(xyz, cloud_ptr, int(n_neighbors))
+        nb = Neighborhoods(
+            indptr,
+            np.empty(indptr[-1], dtype=np.int32),
+            np.empty(indptr[-1] if with_sqdist else 0, dtype=np.float32),
         )
-    if not radius > 0:
-        raise ValueError(f"radius must be positive, got {radius}")
-    counts = tree.query_ball_point(xyz, r=radius, workers=workers, return_length=True)
-    indptr = np.zeros(n + 1, dtype=np.int64)
+        hard = np.zeros(n, dtype=np.bool_)
+        args = (xyz[grid[4]], cloud_ptr, origin, h, dims, *grid, indptr, _MAX_SHELL)
+        parallel_rows(g.knn_rows, n, n_jobs, *args, nb.indices, nb.sqdist, hard)
+        if hard.any():
+            _knn_kd_tree(xyz, cloud_ptr, indptr, np.flatnonzero(hard), n_jobs, nb)
+        return nb
+    origin, h, dims = _grid_shape(xyz, cloud_ptr, np.full(len(sizes), radius))
+    grid = g.build_grid(xyz, cloud_ptr, origin, h, dims)[:5]
+    args = (xyz[grid[4]], cloud_ptr, origin, h, dims, *grid, float(radius) ** 2)
+    counts = np.empty(n, dtype=np.int64)
+    none_i, none_f = np.empty(0, dtype=np.int32), np.empty(0, dtype=np.float32)
+    parallel_rows(g.ball_rows, n, n_jobs, *args, indptr[:0], counts, none_i, none_f)
     np.cumsum(counts, out=indptr[1:])
-    indices = np.empty(indptr[-1], dtype=np.int32)
-    sqdist = np.empty(indptr[-1], dtype=np.float32)
-    bound = np.nextafter(radius, np.inf)
-    for start in range(0, n, _CHUNK):
-        stop = min(n, start + _CHUNK)
-        k = int(counts[start:stop].max())
-        dist, idx = tree.query(
-            xyz[start:stop], k=k, distance_upper_bound=bound, workers=workers
-        )
-        dist, idx = dist.reshape(stop - start, k), idx.reshape(stop - start, k)
-        idx, dist = _self_first(idx, dist)
-        keep = dist <= radius
-        # query and query_ball_point may disagree on points exactly at the radius
-        got = keep.sum(axis=1)
-        if not np.array_equal(got, counts[start:stop]):
-            return _radius_from_ball_point(tree, xyz, radius, workers)
-        indices[indptr[start] : indptr[stop]] = idx[keep]
-        sqdist[indptr[start] : indptr[stop]] = dist[keep] ** 2
-    return Neighborhoods(indptr, indices, sqdist)
-
-
-def _self_first(idx, dist):
-    """Put the query point first among the neighbours at distance zero."""
-    rows = np.arange(len(idx))
-    first = idx[:, 0] != rows
-    if first.any():
-        # duplicates of the query point tie with it at distance 0
-        pos = np.argmax(idx == rows[:, None], axis=1)
-        hit = first & (idx[rows, pos] == rows)
-        for r in np.flatnonzero(hit):
-            p = pos[r]
-            idx[r, 1 : p + 1] = idx[r, :p].copy()
-            idx[r, 0] = r
-    return idx, dist
-
-
-def _radius_from_ball_point(tree, xyz, radius, workers):
-    """Slow, exact fallback for radius neighbourhoods."""
-    lists = tree.query_ball_point(xyz, r=radius, workers=workers, return_sorted=True)
-    indptr = np.zeros(len(xyz) + 1, dtype=np.int64)
-    np.cumsum([len(x) for x in lists], out=indptr[1:])
-    indices = np.fromiter(
-        (j for x in lists for j in x), dtype=np.int32, count=int(indptr[-1])
+    nb = Neighborhoods(
+        indptr,
+        np.empty(indptr[-1], dtype=np.int32),
+        np.empty(indptr[-1] if with_sqdist else 0, dtype=np.float32),
     )
-    rows = np.repeat(np.arange(len(xyz)), np.diff(indptr))
-    d2 = ((xyz[indices] - xyz[rows]) ** 2).sum(axis=1)
-    order = np.lexsort((indices != rows, d2, rows))
-    return Neighborhoods(indptr, indices[order], d2[order].astype(np.float32))
+    parallel_rows(g.ball_rows, n, n_jobs, *args, indptr, counts, nb.indices, nb.sqdist)
+    return nb
 
 
-def _workers(n_jobs):
-    from joblib import effective_n_jobs
+def _extents(xyz, cloud_ptr):
+    n_clouds = len(cloud_ptr) - 1
+    lo = np.zeros((n_clouds, 3))
+    hi = np.zeros((n_clouds, 3))
+    full = np.flatnonzero(np.diff(cloud_ptr) > 0)
+    if len(full):
+        lo[full] = np.minimum.reduceat(xyz, cloud_ptr[full], axis=0)
+        hi[full] = np.maximum.reduceat(xyz, cloud_ptr[full], axis=0)
+    return lo, hi
 
-    return int(effective_n_jobs(n_jobs))
+
+def _grid_shape(xyz, cloud_ptr, h, lo_hi=None):
+    """Origins, cell sizes (at least ``h``, above the radius) and grid shapes."""
+    from skpcd.preprocessing._grid_kernels import MAX_DIM
+
+    lo, hi = _extents(xyz, cloud_ptr) if lo_hi is None else lo_hi
+    extent = hi - lo
+    # cells a hair wider than asked: a radius query's 27 cells cover the ball
+    # whatever the rounding of cell coordinates
+    h = np.maximum(h * (1 + 1e-9), extent.max(axis=1) / (MAX_DIM - 2))
+    h = np.where(h > 0, h, 1.0)
+    dims = (np.floor(extent / h[:, None]) + 1).astype(np.int64)
+    return lo, h, dims
+
+
+def _knn_grid(xyz, cloud_ptr, k):
+    """Grid for k-nearest searches, cell sizes adapted to each cloud's density."""
+    from skpcd.preprocessing._grid_kernels import build_grid
+
+    sizes = np.diff(cloud_ptr)
+    target = max(1.0, _OCCUPANCY * k)
+    lo, hi = _extents(xyz, cloud_ptr)
+    e = np.sort(hi - lo, axis=1)
+    # first guess: points spread over the largest face of the bounding box
+    area = e[:, 2] * np.maximum(e[:, 1], 1e-3 * e[:, 2])
+    h = np.sqrt(area * target / np.maximum(sizes, 1))
+    for _ in range(3):
+        origin, h, dims = _grid_shape(xyz, cloud_ptr, h, (lo, hi))
+        table, cell_cloud, cell_key, cell_start, order, n_cells = build_grid(
+            xyz, cloud_ptr, origin, h, dims
+        )
+        occupancy = sizes / np.maximum(n_cells, 1)
+        off = (occupancy < target / 2) | (occupancy > target * 2)
+        off &= sizes > 4 * target
+        if not off.any():
+            break
+        # occupancy grows like h**2 on the surfaces LiDAR samples
+        h = h * np.where(off, np.clip(np.sqrt(target / occupancy), 0.25, 4.0), 1.0)
+    return origin, h, dims, (table, cell_cloud, cell_key, cell_start, order)
+
+
+def _sqdist(xyz, rows, idx):
+    d = xyz[idx] - xyz[rows]
+    return (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2]
+
+
+def _knn_kd_tree(xyz, cloud_ptr, indptr, which, n_jobs, nb=None):
+    """k nearest with cKDTree, for all points or the points ``which``."""
+    if nb is None:
+        nb = Neighborhoods(
+            indptr,
+            np.empty(indptr[-1], dtype=np.int32),
+            np.empty(indptr[-1], dtype=np.float32),
+        )
+    workers = effective_threads(n_jobs)
+    for c in range(len(cloud_ptr) - 1):
+        start, stop = int(cloud_ptr[c]), int(cloud_ptr[c + 1])
+        if which is None:
+            q = np.arange(start, stop)
+        else:
+            q = which[(which >= start) & (which < stop)]
+        if stop == start or len(q) == 0:
+            continue
+        k = min(int(indptr[start + 1] - indptr[start]), stop - start)
+        # one neighbour more: a duplicate of the query may push it out
+        kq = min(k + 1, stop - start)
+        _, idx = cKDTree(xyz[start:stop]).query(xyz[q], k=kq, workers=workers)
+        idx = idx.reshape(len(q), kq) + start
+        rows = np.repeat(q, kq)
+        idx = idx.ravel()
+        d2 = _sqdist(xyz, rows, idx)
+        d2 = np.where(idx == rows, -1.0, d2)
+        o = np.lexsort((idx, d2, rows)).reshape(len(q), kq)[:, :k].ravel()
+        slots = (indptr[q][:, None] + np.arange(k)).ravel()
+        nb.indices[slots] = idx[o]
+        if len(nb.sqdist):
+            nb.sqdist[slots] = np.maximum(d2[o], 0.0)
+    return nb
+
+
+def _radius_kd_tree(xyz, cloud_ptr, radius, n_jobs):
+    """Radius neighbourhoods with cKDTree."""
+    workers = effective_threads(n_jobs)
+    lists = []
+    for c in range(len(cloud_ptr) - 1):
+        start, stop = int(cloud_ptr[c]), int(cloud_ptr[c + 1])
+        if stop > start:
+            part = xyz[start:stop]
+            found = cKDTree(part).query_ball_point(
+                part, r=radius * (1 + 1e-12), workers=workers
+            )
+            lists.extend(np.asarray(x, dtype=np.int64) + start for x in found)
+    sizes = np.array([len(x) for x in lists], dtype=np.int64)
+    indptr = np.zeros(len(xyz) + 1, dtype=np.int64)
+    np.cumsum(sizes, out=indptr[1:])
+    idx = np.concatenate(lists)
+    rows = np.repeat(np.arange(len(xyz)), sizes)
+    d2 = _sqdist(xyz, rows, idx)
+    keep = d2 <= radius * radius  # the grid's test, in the same arithmetic
+    d2 = np.where(idx == rows, -1.0, d2)
+    o = np.lexsort((idx, d2, rows))
+    o = o[keep[o]]
+    counts = np.bincount(rows[o], minlength=len(xyz))
+    indptr[1:] = np.cumsum(counts)
+    return Neighborhoods(
+        indptr, idx[o].astype(np.int32), np.maximum(d2[o], 0.0).astype(np.float32)
+    )

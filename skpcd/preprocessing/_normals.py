@@ -7,9 +7,12 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin, _fit_context
 from sklearn.utils._param_validation import Interval
 
-from skpcd.preprocessing._neighbors import Neighborhoods, compute_neighborhoods
+from skpcd.preprocessing._neighbors import (
+    compute_neighborhoods,
+    search_packed,
+)
 from skpcd.utils import check_point_clouds
-from skpcd.utils._parallel import numba_threads
+from skpcd.utils._parallel import parallel_rows
 
 __all__ = ["NormalEstimator", "estimate_normals"]
 
@@ -106,21 +109,31 @@ def estimate_normals(
 
 def _normals_packed(xyz, neighborhoods, viewpoint, n_jobs):
     """Kernel call on packed arrays (one or many clouds, global indices)."""
-    from skpcd.preprocessing._normals_kernels import normals_pca
+    normals, curvature = _normals_f32(
+        np.ascontiguousarray(xyz, dtype=np.float32), neighborhoods, viewpoint, n_jobs
+    )
+    return normals.astype(np.float64), curvature.astype(np.float64)
 
-    n = len(xyz)
+
+def _normals_f32(points, neighborhoods, viewpoint, n_jobs):
+    """Normals and curvature, float32, of float32 packed points."""
+    from skpcd.preprocessing._normals_kernels import normals_rows
+
+    n = len(points)
     normals = np.empty((n, 3), dtype=np.float32)
     curvature = np.empty(n, dtype=np.float32)
-    with numba_threads(n_jobs):
-        normals_pca(
-            np.ascontiguousarray(xyz, dtype=np.float32),
-            neighborhoods.indptr,
-            neighborhoods.indices,
-            viewpoint.astype(np.float32),
-            normals,
-            curvature,
-        )
-    return normals.astype(np.float64), curvature.astype(np.float64)
+    parallel_rows(
+        normals_rows,
+        n,
+        n_jobs,
+        points,
+        neighborhoods.indptr,
+        neighborhoods.indices,
+        viewpoint.astype(np.float32),
+        normals,
+        curvature,
+    )
+    return normals, curvature
 
 
 class NormalEstimator(TransformerMixin, BaseEstimator):
@@ -240,7 +253,9 @@ class NormalEstimator(TransformerMixin, BaseEstimator):
         return tags
 
 
-def pack_neighborhoods(clouds, *, n_neighbors=None, radius=None, n_jobs=None):
+def pack_neighborhoods(
+    clouds, *, n_neighbors=None, radius=None, n_jobs=None, with_sqdist=True
+):
     """Stack clouds and their neighbourhoods into one set of packed arrays.
 
     Parameters
@@ -251,6 +266,8 @@ def pack_neighborhoods(clouds, *, n_neighbors=None, radius=None, n_jobs=None):
         The search; ``radius`` wins when both are set.
     n_jobs : int, default=None
         Threads for the searches.
+    with_sqdist : bool, default=True
+        False leaves the neighbourhoods' ``sqdist`` empty.
 
     Returns
     -------
@@ -264,12 +281,6 @@ def pack_neighborhoods(clouds, *, n_neighbors=None, radius=None, n_jobs=None):
     offsets = np.zeros(len(clouds) + 1, dtype=np.int64)
     np.cumsum([len(c) for c in clouds], out=offsets[1:])
     search = {"radius": radius} if radius is not None else {"n_neighbors": n_neighbors}
-    parts = [compute_neighborhoods(c, n_jobs=n_jobs, **search) for c in clouds]
     xyz = np.ascontiguousarray(np.vstack([c[:, :3] for c in clouds]), dtype=np.float64)
-    if len(parts) == 1:
-        return xyz, offsets, parts[0]
-    indptr = np.zeros(len(xyz) + 1, dtype=np.int64)
-    np.cumsum(np.concatenate([p.sizes for p in parts]), out=indptr[1:])
-    indices = np.concatenate([p.indices + np.int32(o) for p, o in zip(parts, offsets)])
-    sqdist = np.concatenate([p.sqdist for p in parts])
-    return xyz, offsets, Neighborhoods(indptr, indices, sqdist)
+    nb = search_packed(xyz, offsets, n_jobs=n_jobs, with_sqdist=with_sqdist, **search)
+    return xyz, offsets, nb

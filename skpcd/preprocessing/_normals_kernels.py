@@ -14,7 +14,7 @@ normal NaN, as in PCL 1.13.0.
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 F0 = np.float32(0.0)
 F05 = np.float32(0.5)
@@ -104,16 +104,15 @@ def eigen33_smallest(c00, c01, c02, c11, c12, c22):
     return lam * scale, vx / best, vy / best, vz / best
 
 
-@njit(cache=True, nogil=True, parallel=True)
-def normals_pca(points, indptr, indices, viewpoint, normals, curvature):
-    """Normals and curvature of every point from its CSR neighbourhood.
+@njit(cache=True, nogil=True)
+def normals_rows(lo, hi, points, indptr, indices, viewpoint, normals, curvature):
+    """Normals and curvature of points ``lo`` to ``hi`` from their neighbourhoods.
 
-    ``points`` and ``viewpoint`` are float32; ``normals`` (n, 3) and
+    ``points`` and ``viewpoint`` are float32; rows of ``normals`` (n, 3) and
     ``curvature`` (n,) are filled in place. Fewer than three neighbours give
     NaN normal and curvature (PCL's rule).
     """
-    n = len(indptr) - 1
-    for i in prange(n):
+    for i in range(lo, hi):
         start, stop = indptr[i], indptr[i + 1]
         m = stop - start
         if m < 3:

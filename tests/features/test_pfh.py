@@ -134,9 +134,9 @@ def test_nan_normals_go_to_bin_zero_and_lone_points_are_zero():
 def test_fpfh_conventions_follow_their_definitions():
     pts, normals = _cloud(3, 150)
     nb = compute_neighborhoods(pts, n_neighbors=10)
-    from skpcd.features._pfh_kernels import spfh
+    from skpcd.features._pfh import _spfh
 
-    s = spfh(pts, normals, nb.indptr, nb.indices, 11)
+    s = _spfh(pts, normals, nb, 11)
     pcl = compute_fpfh(pts, normals, neighborhoods=nb)
     o3d = compute_fpfh(pts, normals, neighborhoods=nb, convention="open3d")
     paper = compute_fpfh(pts, normals, neighborhoods=nb, convention="paper")

@@ -50,3 +50,81 @@ def test_small_cloud_and_errors():
         compute_neighborhoods(np.zeros((3, 3)), radius=-1)
     with pytest.raises(ValueError, match="NaN"):
         compute_neighborhoods(np.full((3, 3), np.nan), n_neighbors=2)
+
+
+def _assert_same(a, b, ties_ok=False):
+    np.testing.assert_array_equal(a.indptr, b.indptr)
+    np.testing.assert_array_equal(a.sqdist, b.sqdist)
+    if not ties_ok:
+        np.testing.assert_array_equal(a.indices, b.indices)
+
+
+@pytest.mark.parametrize("search", [{"n_neighbors": 10}, {"radius": 0.15}])
+def test_grid_equals_kd_tree_on_random_and_clustered_clouds(search):
+    rng = np.random.default_rng(3)
+    pts = np.vstack(
+        [
+            rng.uniform(0, 1, size=(800, 3)),  # volume
+            np.column_stack([rng.uniform(5, 7, (600, 2)), np.full(600, 2.0)]),  # plane
+            rng.normal(20, 0.01, size=(50, 3)),  # dense blob
+            [[100.0, 100, 100], [-50, 3, 1]],  # isolated: beyond the grid's shells
+        ]
+    )
+    grid = compute_neighborhoods(pts, algorithm="grid", **search)
+    tree = compute_neighborhoods(pts, algorithm="kd_tree", **search)
+    _assert_same(grid, tree)
+    # ties broken by index, the point first
+    for i in range(0, len(pts), 97):
+        row = grid.indices[grid.indptr[i] : grid.indptr[i + 1]]
+        d = grid.sqdist[grid.indptr[i] : grid.indptr[i + 1]]
+        assert row[0] == i
+        assert all((d[1:-1] < d[2:]) | ((d[1:-1] == d[2:]) & (row[1:-1] < row[2:])))
+
+
+def test_grid_ties_on_a_lattice_keep_lowest_indices():
+    # a centimetre lattice: many neighbours at exactly the same distance
+    g = np.stack(np.meshgrid(*[np.arange(6) * 0.01] * 3, indexing="ij"), -1)
+    pts = g.reshape(-1, 3)
+    nb = compute_neighborhoods(pts, n_neighbors=9, algorithm="grid")
+    e = pts[None, :, :] - pts[:, None, :]
+    d = (e[..., 0] * e[..., 0] + e[..., 1] * e[..., 1]) + e[..., 2] * e[..., 2]
+    ids = np.arange(len(pts))
+    for i in range(len(pts)):
+        row = nb.indices[nb.indptr[i] : nb.indptr[i + 1]]
+        order = np.lexsort((ids, np.where(ids == i, -1, d[i])))
+        assert row.tolist() == order[:9].tolist()
+
+
+def test_packed_search_never_crosses_clouds():
+    from skpcd.preprocessing._neighbors import search_packed
+
+    rng = np.random.default_rng(0)
+    a, b = rng.random((300, 3)), rng.random((5, 3))  # same place, two clouds
+    xyz = np.vstack([a, b])
+    ptr = np.array([0, 300, 305])
+    for algorithm in ("grid", "kd_tree"):
+        nb = search_packed(xyz, ptr, n_neighbors=8, algorithm=algorithm)
+        assert nb.sizes.tolist() == [8] * 300 + [5] * 5
+        assert (nb.indices[: 300 * 8] < 300).all() and (
+            nb.indices[300 * 8 :] >= 300
+        ).all()
+        nb = search_packed(xyz, ptr, radius=0.3, algorithm=algorithm)
+        rows = np.repeat(np.arange(305), nb.sizes)
+        assert ((rows < 300) == (nb.indices < 300)).all()
+
+
+def test_unknown_algorithm_is_refused():
+    with pytest.raises(ValueError, match="algorithm"):
+        compute_neighborhoods(np.zeros((3, 3)), n_neighbors=2, algorithm="ball")
+
+
+def test_grid_equals_kd_tree_on_real_objects(dales):
+    clouds = dales[0][:25]
+    from skpcd.preprocessing._neighbors import search_packed
+    from skpcd.preprocessing._normals import pack_neighborhoods
+
+    xyz, ptr, grid = pack_neighborhoods(clouds, n_neighbors=10, n_jobs=2)
+    tree = search_packed(xyz, ptr, n_neighbors=10, algorithm="kd_tree")
+    _assert_same(grid, tree, ties_ok=True)
+    # ties aside, the neighbour sets agree: same distances row by row
+    assert (grid.indices == tree.indices).mean() > 0.99
