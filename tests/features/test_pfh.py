@@ -237,3 +237,40 @@ def test_invariant_to_rigid_motion_and_point_order(seed):
         l1 = np.abs(moved_rows - base).sum(axis=1)
         assert np.mean(l1 <= 10) >= share
         assert np.abs(moved_rows.mean(axis=0) - base.mean(axis=0)).max() < 1.0
+
+
+def test_fast_theta_bin_equals_atan2f_bin():
+    from numba import njit
+
+    from skpcd.features._pfh_kernels import _bin_angle, _bin_theta
+
+    @njit
+    def both(fy, fx, n_bins):
+        fast = np.empty(len(fy), np.int64)
+        exact = np.empty(len(fy), np.int64)
+        for t in range(len(fy)):
+            fast[t] = _bin_theta(fy[t], fx[t], n_bins)
+            exact[t] = _bin_angle(np.float32(np.arctan2(fy[t], fx[t])), n_bins)
+        return fast, exact
+
+    rng = np.random.default_rng(0)
+    ang = rng.uniform(-np.pi, np.pi, 200_000)
+    # angles at and around every bin edge, signed zeros, NaN, inf
+    edges = -np.pi + 2 * np.pi * np.arange(12) / 11
+    near = (edges[:, None] + np.linspace(-1e-4, 1e-4, 2001)[None, :]).ravel()
+    ang = np.concatenate([ang, near, edges])
+    r = rng.uniform(0.1, 1, len(ang))
+    fy = np.concatenate([r * np.sin(ang), [0.0, -0.0, 0.0, -0.0, np.nan, 1, np.inf]])
+    fx = np.concatenate([r * np.cos(ang), [0.0, 0.0, -0.0, -0.0, 1, np.nan, 1]])
+    fy, fx = fy.astype(np.float32), fx.astype(np.float32)
+    for n_bins in (5, 11):
+        fast, exact = both(fy, fx, n_bins)
+        np.testing.assert_array_equal(fast, exact)
+    # the polynomial's error bound that the margin relies on
+    a = np.linspace(0, 1, 1_000_001)
+    z = a * a
+    poly = a * (
+        0.9998660
+        + z * (-0.3302995 + z * (0.1801410 + z * (-0.0851330 + z * 0.0208351)))
+    )
+    assert np.abs(poly - np.arctan(a)).max() < 2e-5
