@@ -112,10 +112,10 @@ def build_grid(xyz, cloud_ptr, origin, h, dims):
 
 @njit(cache=True, nogil=True)
 def knn_rows(
-    lo, hi, xs, cloud_ptr, origin, h, dims, table, cell_cloud, cell_key,
-    cell_start, order, indptr, max_shell, indices, sqdist, hard,
+    lo, hi, queries, xyz, xs, cloud_ptr, origin, h, dims, table, cell_cloud,
+    cell_key, cell_start, order, indptr, max_shell, indices, sqdist, hard,
 ):  # fmt: skip
-    """k nearest neighbours of the points ``order[lo:hi]``.
+    """k nearest neighbours of the points ``queries[lo:hi]``.
 
     ``xs`` holds the points sorted by cell (``xyz[order]``); ``indptr``
     gives each point's k. An empty ``sqdist`` is not filled. Rows of points
@@ -126,21 +126,21 @@ def knn_rows(
     mask = len(table) - 1
     k_max = 1
     for p in range(lo, hi):
-        i = order[p]
+        i = queries[p]
         k_max = max(k_max, indptr[i + 1] - indptr[i])
     bd = np.empty(k_max)
     bi = np.empty(k_max, dtype=np.int64)
     q = np.empty(3)
     cc = np.empty(3, dtype=np.int64)
     for p in range(lo, hi):
-        i = order[p]
+        i = queries[p]
         kc = indptr[i + 1] - indptr[i]
         if kc == 0:
             continue
         c = np.searchsorted(cloud_ptr, i, side="right") - 1
         hc = h[c]
         for a in range(3):
-            q[a] = xs[p, a]
+            q[a] = xyz[i, a]
             cc[a] = _coord(q[a], origin[c, a], hc, dims[c, a])
         bd[0] = -1.0
         bi[0] = i

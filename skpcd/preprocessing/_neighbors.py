@@ -24,8 +24,10 @@ ALGORITHMS = ("auto", "grid", "kd_tree")
 # Target number of points per occupied cell for k-nearest searches, as a
 # fraction of k: the 27 cells around a point then hold its k nearest.
 _OCCUPANCY = 0.4
-# Shells of cells a k-nearest query may scan before the k-d tree takes over.
+# Shells of cells a k-nearest query may scan before a coarser grid takes over.
 _MAX_SHELL = 3
+# Passes on ever coarser grids before the remaining queries go to cKDTree.
+_COARSER = 3
 
 
 @dataclass(frozen=True)
@@ -191,17 +193,26 @@ def search_packed(
 
     n = len(xyz)
     if n_neighbors is not None:
-        origin, h, dims, grid = _knn_grid(xyz, cloud_ptr, int(n_neighbors))
         nb = Neighborhoods(
             indptr,
             np.empty(indptr[-1], dtype=np.int32),
             np.empty(indptr[-1] if with_sqdist else 0, dtype=np.float32),
         )
         hard = np.zeros(n, dtype=np.bool_)
-        args = (xyz[grid[4]], cloud_ptr, origin, h, dims, *grid, indptr, _MAX_SHELL)
-        parallel_rows(g.knn_rows, n, n_jobs, *args, nb.indices, nb.sqdist, hard)
-        if hard.any():
-            _knn_kd_tree(xyz, cloud_ptr, indptr, np.flatnonzero(hard), n_jobs, nb)
+        origin, h, dims, grid = _knn_grid(xyz, cloud_ptr, int(n_neighbors))
+        queries = grid[4]  # in cell order: neighbouring queries share cells
+        for _ in range(_COARSER):
+            args = (xyz, xyz[grid[4]], cloud_ptr, origin, h, dims, *grid, indptr)
+            out = (_MAX_SHELL, nb.indices, nb.sqdist, hard)
+            parallel_rows(g.knn_rows, len(queries), n_jobs, queries, *args, *out)
+            queries = np.flatnonzero(hard)
+            if len(queries) == 0:
+                return nb
+            # isolated points: again on cells four times wider
+            hard[:] = False
+            origin, h, dims = _grid_shape(xyz, cloud_ptr, 4 * h)
+            grid = g.build_grid(xyz, cloud_ptr, origin, h, dims)[:5]
+        _knn_kd_tree(xyz, cloud_ptr, indptr, queries, n_jobs, nb)
         return nb
     origin, h, dims = _grid_shape(xyz, cloud_ptr, np.full(len(sizes), radius))
     grid = g.build_grid(xyz, cloud_ptr, origin, h, dims)[:5]
