@@ -241,9 +241,7 @@ def _worker_skpcd(spec, clouds):
         return {}
 
     runs = _timed_runs(run, spec)
-    import numba
-
-    return runs, rss_warm, out_bytes[0], {"threading_layer": numba.threading_layer()}
+    return runs, rss_warm, out_bytes[0], {}
 
 
 def _worker_open3d(spec, clouds):
@@ -489,7 +487,7 @@ def _report(R):
             "!! MACHINE LOADED (load average > 1.5): wall times are inflated and noisy;"
         )
         add("!! the CPU column (process CPU seconds) is the steadier measure.")
-    add(f"versions: {m['versions']}, numba threading layer: {R.get('threading_layer')}")
+    add(f"versions: {m['versions']}")
     d = R["data"]
     add(f"data: {d['n_objects']} objects, {d['n_points']} points")
     if "radius_mean_neighbours_all" in d:
@@ -731,7 +729,6 @@ def _main(a, R, groups, tmp):
             "data": data,
         }
         out = _run_worker(spec)
-        R["threading_layer"] = out.get("threading_layer")
         return out
 
     def pcl_files(layout, subset=None):
