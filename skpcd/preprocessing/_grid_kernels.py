@@ -43,16 +43,14 @@ def _coord(x, origin, h, dim):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _lookup(table, cell_cloud, cell_key, cloud, key):
-    mask = np.uint64(len(table) - 1)
-    s = _slot(cloud, key, mask)
+def _find(table, cell_cloud, cell_key, cloud, key, mask):
+    """Cell number of (cloud, key), or -1; inlined (it takes arrays)."""
+    s = _slot(cloud, key, np.uint64(mask))
     while True:
         cell = table[s]
-        if cell < 0:
-            return -1
-        if cell_key[cell] == key and cell_cloud[cell] == cloud:
+        if cell < 0 or (cell_key[cell] == key and cell_cloud[cell] == cloud):
             return cell
-        s = (s + 1) & (len(table) - 1)
+        s = (s + 1) & mask
 
 
 @njit(cache=True, nogil=True)
@@ -132,6 +130,15 @@ def knn_rows(
     bi = np.empty(k_max, dtype=np.int64)
     q = np.empty(3)
     cc = np.empty(3, dtype=np.int64)
+    # the 27 cells around the previous query's cell: queries come in cell
+    # order, so the few points of a cell share these lookups
+    block_start = np.empty(27, dtype=np.int64)
+    block_stop = np.empty(27, dtype=np.int64)
+    n_block = 0
+    block_of = np.full(4, -1, dtype=np.int64)
+    n_shell = (2 * max_shell + 1) ** 3
+    shell_start = np.empty(n_shell, dtype=np.int64)
+    shell_stop = np.empty(n_shell, dtype=np.int64)
     for p in range(lo, hi):
         i = queries[p]
         kc = indptr[i + 1] - indptr[i]
@@ -142,63 +149,54 @@ def knn_rows(
         for a in range(3):
             q[a] = xyz[i, a]
             cc[a] = _coord(q[a], origin[c, a], hc, dims[c, a])
+        if (
+            c != block_of[0]
+            or cc[0] != block_of[1]
+            or cc[1] != block_of[2]
+            or cc[2] != block_of[3]
+        ):
+            block_of[0], block_of[1], block_of[2], block_of[3] = c, cc[0], cc[1], cc[2]
+            n_block = 0
+            for x in range(max(cc[0] - 1, 0), min(cc[0] + 2, dims[c, 0])):
+                for y in range(max(cc[1] - 1, 0), min(cc[1] + 2, dims[c, 1])):
+                    for z in range(max(cc[2] - 1, 0), min(cc[2] + 2, dims[c, 2])):
+                        key = (x * dims[c, 1] + y) * dims[c, 2] + z
+                        cell = _find(table, cell_cloud, cell_key, c, key, mask)
+                        if cell >= 0:
+                            block_start[n_block] = cell_start[cell]
+                            block_stop[n_block] = cell_start[cell + 1]
+                            n_block += 1
         bd[0] = -1.0
         bi[0] = i
         count = 1
-        s = 0
+        s = 1
+        starts, stops, n_ranges = block_start, block_stop, n_block
         while True:
-            for dx in range(-s, s + 1):
-                x = cc[0] + dx
-                if x < 0 or x >= dims[c, 0]:
-                    continue
-                for dy in range(-s, s + 1):
-                    y = cc[1] + dy
-                    if y < 0 or y >= dims[c, 1]:
+            for r in range(n_ranges):
+                for t in range(starts[r], stops[r]):
+                    j = order[t]
+                    if j == i:
                         continue
-                    edge = abs(dx) == s or abs(dy) == s
-                    step = 1 if edge else max(2 * s, 1)
-                    for dz in range(-s, s + 1, step):
-                        z = cc[2] + dz
-                        if z < 0 or z >= dims[c, 2]:
-                            continue
-                        key = (x * dims[c, 1] + y) * dims[c, 2] + z
-                        slot = _slot(c, key, np.uint64(mask))
-                        while True:
-                            cell = table[slot]
-                            if cell < 0 or (
-                                cell_key[cell] == key and cell_cloud[cell] == c
-                            ):
-                                break
-                            slot = (slot + 1) & mask
-                        if cell < 0:
-                            continue
-                        for t in range(cell_start[cell], cell_start[cell + 1]):
-                            j = order[t]
-                            if j == i:
-                                continue
-                            ex = xs[t, 0] - q[0]
-                            ey = xs[t, 1] - q[1]
-                            ez = xs[t, 2] - q[2]
-                            d2 = ex * ex + ey * ey + ez * ez
-                            # insertion into the sorted buffer of the k best
-                            if count < kc:
-                                pos = count
-                                count += 1
-                            elif d2 < bd[kc - 1] or (
-                                d2 == bd[kc - 1] and j < bi[kc - 1]
-                            ):
-                                pos = kc - 1
-                            else:
-                                continue
-                            while pos > 0 and (
-                                bd[pos - 1] > d2
-                                or (bd[pos - 1] == d2 and bi[pos - 1] > j)
-                            ):
-                                bd[pos] = bd[pos - 1]
-                                bi[pos] = bi[pos - 1]
-                                pos -= 1
-                            bd[pos] = d2
-                            bi[pos] = j
+                    ex = xs[t, 0] - q[0]
+                    ey = xs[t, 1] - q[1]
+                    ez = xs[t, 2] - q[2]
+                    d2 = ex * ex + ey * ey + ez * ez
+                    # insertion into the sorted buffer of the k best
+                    if count < kc:
+                        pos = count
+                        count += 1
+                    elif d2 < bd[kc - 1] or (d2 == bd[kc - 1] and j < bi[kc - 1]):
+                        pos = kc - 1
+                    else:
+                        continue
+                    while pos > 0 and (
+                        bd[pos - 1] > d2 or (bd[pos - 1] == d2 and bi[pos - 1] > j)
+                    ):
+                        bd[pos] = bd[pos - 1]
+                        bi[pos] = bi[pos - 1]
+                        pos -= 1
+                    bd[pos] = d2
+                    bi[pos] = j
             # distance from q to the space outside the scanned block
             bound = np.inf
             for a in range(3):
@@ -215,6 +213,28 @@ def knn_rows(
             if s > max_shell:
                 hard[i] = True
                 break
+            # the next shell: cells at Chebyshev distance s
+            n_ranges = 0
+            for dx in range(-s, s + 1):
+                x = cc[0] + dx
+                if x < 0 or x >= dims[c, 0]:
+                    continue
+                for dy in range(-s, s + 1):
+                    y = cc[1] + dy
+                    if y < 0 or y >= dims[c, 1]:
+                        continue
+                    step = 1 if abs(dx) == s or abs(dy) == s else 2 * s
+                    for dz in range(-s, s + 1, step):
+                        z = cc[2] + dz
+                        if z < 0 or z >= dims[c, 2]:
+                            continue
+                        key = (x * dims[c, 1] + y) * dims[c, 2] + z
+                        cell = _find(table, cell_cloud, cell_key, c, key, mask)
+                        if cell >= 0:
+                            shell_start[n_ranges] = cell_start[cell]
+                            shell_stop[n_ranges] = cell_start[cell + 1]
+                            n_ranges += 1
+            starts, stops = shell_start, shell_stop
         if hard[i]:
             continue
         base = indptr[i]
@@ -260,14 +280,7 @@ def ball_rows(
             for y in range(max(cy - 1, 0), min(cy + 2, dims[c, 1])):
                 for z in range(max(cz - 1, 0), min(cz + 2, dims[c, 2])):
                     key = (x * dims[c, 1] + y) * dims[c, 2] + z
-                    slot = _slot(c, key, np.uint64(mask))
-                    while True:
-                        cell = table[slot]
-                        if cell < 0 or (
-                            cell_key[cell] == key and cell_cloud[cell] == c
-                        ):
-                            break
-                        slot = (slot + 1) & mask
+                    cell = _find(table, cell_cloud, cell_key, c, key, mask)
                     if cell < 0:
                         continue
                     for t in range(cell_start[cell], cell_start[cell + 1]):
