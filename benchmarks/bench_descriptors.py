@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent
-DEFAULT_DATA = ROOT.parents[1] / "shared" / "data" / "dales_objects"
+DEFAULT_DATA = str(ROOT.parents[1] / "shared" / "data" / "dales_objects")
 DEFAULT_PCL = ROOT / "pcl_reference" / "build" / "pcl_reference"
 N_TILES = 3
 RADIUS = 0.9
