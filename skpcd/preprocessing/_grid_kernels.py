@@ -108,6 +108,18 @@ def build_grid(xyz, cloud_ptr, origin, h, dims):
     return table, cell_cloud, cell_key, cell_start, order, n_cells_of
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _write_row(indices, sqdist, base, i, bi, bd, m):
+    """Store a sorted row, the point first at distance 0; inlined (arrays)."""
+    indices[base] = i
+    for r in range(1, m):
+        indices[base + r] = bi[r]
+    if len(sqdist):
+        sqdist[base] = 0.0
+        for r in range(1, m):
+            sqdist[base + r] = bd[r]
+
+
 @njit(cache=True, nogil=True)
 def knn_rows(
     lo, hi, queries, xyz, xs, cloud_ptr, origin, h, dims, table, cell_cloud,
@@ -235,16 +247,8 @@ def knn_rows(
                             shell_stop[n_ranges] = cell_start[cell + 1]
                             n_ranges += 1
             starts, stops = shell_start, shell_stop
-        if hard[i]:
-            continue
-        base = indptr[i]
-        indices[base] = i
-        for r in range(1, kc):
-            indices[base + r] = bi[r]
-        if len(sqdist):
-            sqdist[base] = 0.0
-            for r in range(1, kc):
-                sqdist[base + r] = bd[r]
+        if not hard[i]:
+            _write_row(indices, sqdist, indptr[i], i, bi, bd, kc)
 
 
 @njit(cache=True, nogil=True)
@@ -310,11 +314,4 @@ def ball_rows(
                     b -= gap
                 bd[b] = d
                 bi[b] = j
-        base = indptr[i]
-        indices[base] = i
-        for a in range(1, m):
-            indices[base + a] = bi[a]
-        if len(sqdist):
-            sqdist[base] = 0.0
-            for a in range(1, m):
-                sqdist[base + a] = bd[a]
+        _write_row(indices, sqdist, indptr[i], i, bi, bd, m)
