@@ -110,7 +110,15 @@ def _versions():
 
 
 def _maxrss_mb():
-    # ru_maxrss is in KiB on Linux
+    """Peak RSS in MB since the last :func:`_reset_peak`.
+
+    VmHWM, which clear_refs resets; ``ru_maxrss`` keeps the peak of the
+    whole process (data loading included) and would overstate the call's.
+    """
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
