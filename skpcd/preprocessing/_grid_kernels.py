@@ -109,6 +109,20 @@ def build_grid(xyz, cloud_ptr, origin, h, dims):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _add_cell(
+    table, cell_cloud, cell_key, cell_start, cloud, key, mask, starts, stops, n
+):
+    """Append the point range of cell (cloud, key), if it exists, to the
+    ``n`` ranges in ``starts``/``stops``; returns the new count. Inlined."""
+    cell = _find(table, cell_cloud, cell_key, cloud, key, mask)
+    if cell < 0:
+        return n
+    starts[n] = cell_start[cell]
+    stops[n] = cell_start[cell + 1]
+    return n + 1
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _write_row(indices, sqdist, base, i, bi, bd, m):
     """Store a sorted row, the point first at distance 0; inlined (arrays)."""
     indices[base] = i
@@ -173,11 +187,10 @@ def knn_rows(
                 for y in range(max(cc[1] - 1, 0), min(cc[1] + 2, dims[c, 1])):
                     for z in range(max(cc[2] - 1, 0), min(cc[2] + 2, dims[c, 2])):
                         key = (x * dims[c, 1] + y) * dims[c, 2] + z
-                        cell = _find(table, cell_cloud, cell_key, c, key, mask)
-                        if cell >= 0:
-                            block_start[n_block] = cell_start[cell]
-                            block_stop[n_block] = cell_start[cell + 1]
-                            n_block += 1
+                        n_block = _add_cell(
+                            table, cell_cloud, cell_key, cell_start, c, key, mask,
+                            block_start, block_stop, n_block,
+                        )  # fmt: skip
         bd[0] = -1.0
         bi[0] = i
         count = 1
@@ -241,11 +254,10 @@ def knn_rows(
                         if z < 0 or z >= dims[c, 2]:
                             continue
                         key = (x * dims[c, 1] + y) * dims[c, 2] + z
-                        cell = _find(table, cell_cloud, cell_key, c, key, mask)
-                        if cell >= 0:
-                            shell_start[n_ranges] = cell_start[cell]
-                            shell_stop[n_ranges] = cell_start[cell + 1]
-                            n_ranges += 1
+                        n_ranges = _add_cell(
+                            table, cell_cloud, cell_key, cell_start, c, key, mask,
+                            shell_start, shell_stop, n_ranges,
+                        )  # fmt: skip
             starts, stops = shell_start, shell_stop
         if not hard[i]:
             _write_row(indices, sqdist, indptr[i], i, bi, bd, kc)
