@@ -6,7 +6,7 @@ PCL's k-d tree returns it. ``sqdist`` holds the squared distances, float32 as
 in PCL.
 
 Two search algorithms give the same neighbourhoods: ``"grid"``, numba kernels
-on a hashed voxel grid (:mod:`skpcd.preprocessing._grid_kernels`), and
+on a sorted voxel grid (:mod:`skpcd.preprocessing._grid_kernels`), and
 ``"kd_tree"``, :class:`scipy.spatial.cKDTree` with parallel queries. Both
 take several clouds packed one after the other and never cross clouds.
 """
@@ -93,7 +93,7 @@ def compute_neighborhoods(
     n_jobs : int, default=None
         Threads for the queries; None means 1, -1 all cores.
     algorithm : {"auto", "grid", "kd_tree"}, default="auto"
-        ``"grid"``: exact search on a hashed voxel grid (numba), several
+        ``"grid"``: exact search on a sorted voxel grid (numba), several
         times faster than a k-d tree on LiDAR clouds; ``"kd_tree"``:
         :class:`scipy.spatial.cKDTree`. ``"auto"`` is ``"grid"``. Both give
         the same neighbourhoods, except which of several points tied at the
@@ -199,35 +199,65 @@ def search_packed(
             np.empty(indptr[-1] if with_sqdist else 0, dtype=np.float32),
         )
         hard = np.zeros(n, dtype=np.bool_)
-        origin, h, dims, grid = _knn_grid(xyz, cloud_ptr, int(n_neighbors))
-        queries = grid[4]  # in cell order: neighbouring queries share cells
-        for _ in range(_COARSER):
-            args = (xyz, xyz[grid[4]], cloud_ptr, origin, h, dims, *grid, indptr)
-            out = (_MAX_SHELL, nb.indices, nb.sqdist, hard)
-            parallel_rows(g.knn_rows, len(queries), n_jobs, queries, *args, *out)
-            queries = np.flatnonzero(hard)
-            if len(queries) == 0:
+        todo = np.zeros(0, dtype=np.bool_)
+        origin, h, dims, order, cells = _knn_grid(xyz, cloud_ptr, int(n_neighbors))
+        rows = np.arange(len(cells[1]))
+        for attempt in range(_COARSER):
+            args = (rows, xyz[order], order, *cells, origin, h, dims, indptr)
+            out = (_MAX_SHELL, todo, nb.indices, nb.sqdist, hard)
+            parallel_rows(g.knn_cells, len(rows), n_jobs, *args, *out)
+            if not hard.any():
                 return nb
+            todo, hard = hard, np.zeros(n, dtype=np.bool_)
+            if attempt == _COARSER - 1:
+                break
             # isolated points: again on cells four times wider
-            hard[:] = False
             origin, h, dims = _grid_shape(xyz, cloud_ptr, 4 * h)
-            grid = g.build_grid(xyz, cloud_ptr, origin, h, dims)[:5]
-        _knn_kd_tree(xyz, cloud_ptr, indptr, queries, n_jobs, nb)
+            order, cells = _build_grid(xyz, cloud_ptr, origin, h, dims)
+            rows = g.cells_with(todo, order, cells[2])
+        _knn_kd_tree(xyz, cloud_ptr, indptr, np.flatnonzero(todo), n_jobs, nb)
         return nb
     origin, h, dims = _grid_shape(xyz, cloud_ptr, np.full(len(sizes), radius))
-    grid = g.build_grid(xyz, cloud_ptr, origin, h, dims)[:5]
-    args = (xyz[grid[4]], cloud_ptr, origin, h, dims, *grid, float(radius) ** 2)
+    order, cells = _build_grid(xyz, cloud_ptr, origin, h, dims)
+    args = (xyz[order], order, *cells, dims, float(radius) ** 2)
     counts = np.empty(n, dtype=np.int64)
     none_i, none_f = np.empty(0, dtype=np.int32), np.empty(0, dtype=np.float32)
-    parallel_rows(g.ball_rows, n, n_jobs, *args, indptr[:0], counts, none_i, none_f)
+    n_cells = len(cells[1])
+    empty = (indptr[:0], counts, none_i, none_f)
+    parallel_rows(g.ball_cells, n_cells, n_jobs, *args, *empty)
     np.cumsum(counts, out=indptr[1:])
     nb = Neighborhoods(
         indptr,
         np.empty(indptr[-1], dtype=np.int32),
         np.empty(indptr[-1] if with_sqdist else 0, dtype=np.float32),
     )
-    parallel_rows(g.ball_rows, n, n_jobs, *args, indptr, counts, nb.indices, nb.sqdist)
+    parallel_rows(
+        g.ball_cells, n_cells, n_jobs, *args, indptr, counts, nb.indices, nb.sqdist
+    )
     return nb
+
+
+def _build_grid(xyz, cloud_ptr, origin, h, dims):
+    """Points sorted by (cloud, cell key), and the cells.
+
+    Returns ``order`` (point indices in that order) and the tuple
+    ``(cell_cloud, cell_key, cell_start, cloud_cells)`` of
+    :func:`~skpcd.preprocessing._grid_kernels.sorted_cells`.
+    """
+    from skpcd.preprocessing import _grid_kernels as g
+
+    sizes = np.diff(cloud_ptr)
+    keys = np.empty(len(xyz), dtype=np.int64)
+    g.cell_keys(xyz, cloud_ptr, origin, h, dims, keys)
+    n_keys = np.prod(dims.astype(np.float64), axis=1)
+    if n_keys.sum() < 2.0**62:
+        # one sort: cloud c's keys shifted past the keys of the clouds before
+        base = np.concatenate([[0], np.cumsum(np.prod(dims, axis=1))[:-1]])
+        order = np.argsort(keys + np.repeat(base, sizes), kind="stable")
+    else:
+        cloud = np.repeat(np.arange(len(sizes)), sizes)
+        order = np.lexsort((keys, cloud))
+    return order, g.sorted_cells(keys[order], cloud_ptr)
 
 
 def _extents(xyz, cloud_ptr):
@@ -256,9 +286,10 @@ def _grid_shape(xyz, cloud_ptr, h, lo_hi=None):
 
 
 def _knn_grid(xyz, cloud_ptr, k):
-    """Grid for k-nearest searches, cell sizes adapted to each cloud's density."""
-    from skpcd.preprocessing._grid_kernels import build_grid
+    """Grid for k-nearest searches, cell sizes adapted to each cloud's density.
 
+    Returns ``origin, h, dims`` and :func:`_build_grid`'s ``order, cells``.
+    """
     sizes = np.diff(cloud_ptr)
     target = max(1.0, _OCCUPANCY * k)
     lo, hi = _extents(xyz, cloud_ptr)
@@ -268,17 +299,15 @@ def _knn_grid(xyz, cloud_ptr, k):
     h = np.sqrt(area * target / np.maximum(sizes, 1))
     for _ in range(3):
         origin, h, dims = _grid_shape(xyz, cloud_ptr, h, (lo, hi))
-        table, cell_cloud, cell_key, cell_start, order, n_cells = build_grid(
-            xyz, cloud_ptr, origin, h, dims
-        )
-        occupancy = sizes / np.maximum(n_cells, 1)
+        order, cells = _build_grid(xyz, cloud_ptr, origin, h, dims)
+        occupancy = sizes / np.maximum(np.diff(cells[3]), 1)
         off = (occupancy < target / 2) | (occupancy > target * 2)
         off &= sizes > 4 * target
         if not off.any():
             break
         # occupancy grows like h**2 on the surfaces LiDAR samples
         h = h * np.where(off, np.clip(np.sqrt(target / occupancy), 0.25, 4.0), 1.0)
-    return origin, h, dims, (table, cell_cloud, cell_key, cell_start, order)
+    return origin, h, dims, order, cells
 
 
 def _sqdist(xyz, rows, idx):
