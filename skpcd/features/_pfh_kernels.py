@@ -103,6 +103,14 @@ def _bin_angle(f1, n_bins):
     return int(min(max(b, 0.0), n_bins - 1.0))
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _atan01(a, z):
+    """atan(a) for 0 <= a <= 1 within 1e-5 rad, ``z = a * a``
+    (Abramowitz and Stegun 4.4.49)."""
+    p = -0.0851330 + z * 0.0208351
+    return a * (0.9998660 + z * (-0.3302995 + z * (0.1801410 + z * p)))
+
+
 @njit(cache=True, nogil=True)
 def _bin_theta(fy, fx, n_bins):
     """``_bin_angle(atan2f(fy, fx))``, mostly without calling ``atan2f``.
@@ -116,11 +124,7 @@ def _bin_theta(fy, fx, n_bins):
     big = max(ax, ay)
     if big > 0.0 and big < np.inf and fx == fx and fy == fy:
         a = min(ax, ay) / big
-        z = a * a
-        r = a * (
-            0.9998660
-            + z * (-0.3302995 + z * (0.1801410 + z * (-0.0851330 + z * 0.0208351)))
-        )
+        r = _atan01(a, a * a)
         if ay > ax:
             r = 0.5 * math.pi - r
         if fx < 0:
@@ -144,64 +148,282 @@ def _bin_cosine(f, n_bins):
     return int(min(max(b, 0.0), n_bins - 1.0))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _fast_code(
+    pax, pay, paz, nax, nay, naz, pbx, pby, pbz, nbx, nby, nbz, nb, margin
+):  # fmt: skip
+    """:func:`_pair` and the three bins without a branch, so loops over
+    pairs run in SIMD lanes. Returns ``(code, good)``, ``code`` the bin
+    ``b1 + nb * (b2 + nb * b3)``; where ``good`` is False (a swap too close
+    to call without ``acosf``, f1 near a bin edge, a zero distance or cross
+    product, NaN) the caller computes the pair again with :func:`_pair`.
+    Where it is True the code is the one :func:`_pair` gives: the same
+    float32 operations in the same order."""
+    dx = pbx - pax
+    dy = pby - pay
+    dz = pbz - paz
+    f4 = np.float32(math.sqrt(_dot(dx, dy, dz, dx, dy, dz)))
+    a1 = _dot(nax, nay, naz, dx, dy, dz) / f4
+    a2 = _dot(nbx, nby, nbz, dx, dy, dz) / f4
+    b1 = abs(a1)
+    b2 = abs(a2)
+    swap = b1 + _SWAP_MARGIN < b2
+    unsure = (b1 < b2) & (not swap)
+    ux = nbx if swap else nax
+    uy = nby if swap else nay
+    uz = nbz if swap else naz
+    tx = nax if swap else nbx
+    ty = nay if swap else nby
+    tz = naz if swap else nbz
+    sx = -dx if swap else dx
+    sy = -dy if swap else dy
+    sz = -dz if swap else dz
+    f3 = -a2 if swap else a1
+    vx = sy * uz - sz * uy
+    vy = sz * ux - sx * uz
+    vz = sx * uy - sy * ux
+    v_norm = np.float32(math.sqrt(_dot(vx, vy, vz, vx, vy, vz)))
+    vx = vx / v_norm
+    vy = vy / v_norm
+    vz = vz / v_norm
+    wx = uy * vz - uz * vy
+    wy = uz * vx - ux * vz
+    wz = ux * vy - uy * vx
+    f2 = _dot(vx, vy, vz, tx, ty, tz)
+    fy = _dot(wx, wy, wz, tx, ty, tz)
+    fx = _dot(ux, uy, uz, tx, ty, tz)
+    # f2, f3 as _bin_cosine; f1 as _bin_theta's polynomial
+    g2 = np.floor(nb * ((np.float64(f2) + 1.0) * 0.5))
+    g3 = np.floor(nb * ((np.float64(f3) + 1.0) * 0.5))
+    ax = abs(np.float64(fx))
+    ay = abs(np.float64(fy))
+    big = ax if ax > ay else ay
+    q = (ay if ax > ay else ax) / big
+    r = _atan01(q, q * q)
+    r = 0.5 * math.pi - r if ay > ax else r
+    r = math.pi - r if fx < 0 else r
+    r = -r if fy < 0 else r
+    v = nb * ((r + math.pi) * D_PI)
+    g1 = np.floor(v)
+    good = (
+        (f4 > F0)
+        & (v_norm > F0)
+        & (big > 0.0)
+        & (big < np.inf)
+        & (v - g1 > margin)
+        & (g1 + 1.0 - v > margin)
+        & (f2 == f2)
+        & (f3 == f3)
+        & (not unsure)
+    )
+    g1 = g1 if good else 0.0
+    g2 = min(max(g2, 0.0), nb - 1.0) if g2 == g2 else 0.0
+    g3 = min(max(g3, 0.0), nb - 1.0) if g3 == g3 else 0.0
+    n = int(nb)
+    return int(g1) + n * (int(g2) + n * int(g3)), good
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _exact_code(
+    pax, pay, paz, nax, nay, naz, pbx, pby, pbz, nbx, nby, nbz, n_bins
+):  # fmt: skip
+    """The bin code of a pair through :func:`_pair`, :func:`_bin_theta`."""
+    fy, fx, f2, f3, _ = _pair(
+        pax, pay, paz, nax, nay, naz, pbx, pby, pbz, nbx, nby, nbz
+    )  # fmt: skip
+    b2 = _bin_cosine(f2, n_bins)
+    return _bin_theta(fy, fx, n_bins) + n_bins * (b2 + n_bins * _bin_cosine(f3, n_bins))
+
+
+# Neighbourhoods of this many points or more run one point at a time (the
+# pairs of a point ``a`` with all earlier points fill the SIMD lanes);
+# smaller ones run LANES points of the same size side by side.
+ROW_MIN = 24
+LANES = 32
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _gather_run(points, normals, indptr, indices, i, n_lanes, m, Q):
+    """``Q[t, 0:6, l]``: position and normal of neighbour ``t`` of point
+    ``i + l``. Inlined (arrays)."""
+    for lane in range(n_lanes):
+        start = indptr[i + lane]
+        for t in range(m):
+            j = indices[start + t]
+            for d in range(3):
+                Q[t, d, lane] = points[j, d]
+                Q[t, 3 + d, lane] = normals[j, d]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _run_end(indptr, i, hi):
+    """End of the run of at most LANES points from ``i`` with ``i``'s size."""
+    m = indptr[i + 1] - indptr[i]
+    e = i + 1
+    while e < hi and e - i < LANES and indptr[e + 1] - indptr[e] == m:
+        e += 1
+    return e
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def pfh_rows(lo, hi, points, normals, indptr, indices, n_bins, out):
     """PFH of points ``lo`` to ``hi`` into the zeroed rows of ``out``.
 
-    Pairs run as in PCL: for each neighbour ``a`` (the point first), with
-    every earlier neighbour ``b``, ``a`` is the first point of the pair.
-    Layout ``(n, n_bins**3)``, f1 fastest.
+    Pairs as in PCL: for each neighbour ``a`` (the point first), with every
+    earlier neighbour ``b``, ``a`` is the first point of the pair. Every
+    pair adds the same ``100 / n_pairs``, so the order of the additions
+    does not change the float32 sums, and pairs run in SIMD lanes
+    (:func:`_fast_code`), across the pairs of one point in large
+    neighbourhoods and across points in small ones. Layout
+    ``(n, n_bins**3)``, f1 fastest.
     """
+    nb = np.float64(n_bins)
+    margin = nb * D_PI * 1e-4
+    m_max = 1
     for i in range(lo, hi):
-        start, stop = indptr[i], indptr[i + 1]
-        n_pairs = ((stop - start) * (stop - start - 1)) // 2
-        if n_pairs == 0:
+        m_max = max(m_max, indptr[i + 1] - indptr[i])
+    Q = np.empty((min(m_max, ROW_MIN), 6, LANES), dtype=np.float32)
+    P = np.empty((6, m_max), dtype=np.float32)
+    code = np.empty(max(LANES, m_max), dtype=np.int64)
+    good = np.empty(max(LANES, m_max), dtype=np.bool_)
+    i = lo
+    while i < hi:
+        m = indptr[i + 1] - indptr[i]
+        if m < 2:
+            i += 1
             continue
-        incr = F100 / np.float32(n_pairs)
-        for a in range(start, stop):
-            ia = indices[a]
-            pax, pay, paz = points[ia, 0], points[ia, 1], points[ia, 2]
-            nax, nay, naz = normals[ia, 0], normals[ia, 1], normals[ia, 2]
-            for b in range(start, a):
-                ib = indices[b]
-                fy, fx, f2, f3, _ = _pair(
-                    pax, pay, paz, nax, nay, naz,
-                    points[ib, 0], points[ib, 1], points[ib, 2],
-                    normals[ib, 0], normals[ib, 1], normals[ib, 2],
-                )  # fmt: skip
-                h = (
-                    _bin_theta(fy, fx, n_bins)
-                    + n_bins * _bin_cosine(f2, n_bins)
-                    + n_bins * n_bins * _bin_cosine(f3, n_bins)
-                )
-                out[i, h] += incr
+        incr = F100 / np.float32((m * (m - 1)) // 2)
+        if m >= ROW_MIN:
+            for t in range(m):
+                j = indices[indptr[i] + t]
+                for d in range(3):
+                    P[d, t] = points[j, d]
+                    P[3 + d, t] = normals[j, d]
+            for a in range(1, m):
+                pax, pay, paz = P[0, a], P[1, a], P[2, a]
+                nax, nay, naz = P[3, a], P[4, a], P[5, a]
+                for b in range(a):
+                    code[b], good[b] = _fast_code(
+                        pax, pay, paz, nax, nay, naz,
+                        P[0, b], P[1, b], P[2, b], P[3, b], P[4, b], P[5, b],
+                        nb, margin,
+                    )  # fmt: skip
+                for b in range(a):
+                    c = code[b]
+                    if not good[b]:
+                        c = _exact_code(
+                            pax, pay, paz, nax, nay, naz,
+                            P[0, b], P[1, b], P[2, b], P[3, b], P[4, b], P[5, b],
+                            n_bins,
+                        )  # fmt: skip
+                    out[i, c] += incr
+            i += 1
+            continue
+        e = _run_end(indptr, i, hi)
+        _gather_run(points, normals, indptr, indices, i, e - i, m, Q)
+        for a in range(1, m):
+            for b in range(a):
+                for lane in range(e - i):
+                    code[lane], good[lane] = _fast_code(
+                        Q[a, 0, lane], Q[a, 1, lane], Q[a, 2, lane],
+                        Q[a, 3, lane], Q[a, 4, lane], Q[a, 5, lane],
+                        Q[b, 0, lane], Q[b, 1, lane], Q[b, 2, lane],
+                        Q[b, 3, lane], Q[b, 4, lane], Q[b, 5, lane],
+                        nb, margin,
+                    )  # fmt: skip
+                for lane in range(e - i):
+                    c = code[lane]
+                    if not good[lane]:
+                        c = _exact_code(
+                            Q[a, 0, lane], Q[a, 1, lane], Q[a, 2, lane],
+                            Q[a, 3, lane], Q[a, 4, lane], Q[a, 5, lane],
+                            Q[b, 0, lane], Q[b, 1, lane], Q[b, 2, lane],
+                            Q[b, 3, lane], Q[b, 4, lane], Q[b, 5, lane],
+                            n_bins,
+                        )  # fmt: skip
+                    out[i + lane, c] += incr
+        i = e
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def spfh_rows(lo, hi, points, normals, indptr, indices, n_bins, counts):
     """SPFH of points ``lo`` to ``hi`` as pair counts per bin.
 
     ``counts`` (n, 3 * n_bins), blocks ``[f1 | f2 | f3]``, zeroed, of an
     unsigned type wide enough for the largest neighbourhood. PCL adds
     ``100 / n_pairs`` once per pair; :func:`spfh_values` turns counts into
-    those sums exactly. The point is the first of each pair.
+    those sums exactly. The point is the first of each pair; neighbours
+    with the point's own index are skipped. Pairs run in SIMD lanes as in
+    :func:`pfh_rows`.
     """
+    nb = np.float64(n_bins)
+    margin = nb * D_PI * 1e-4
+    m_max = 1
     for i in range(lo, hi):
-        start, stop = indptr[i], indptr[i + 1]
-        pix, piy, piz = points[i, 0], points[i, 1], points[i, 2]
-        nix, niy, niz = normals[i, 0], normals[i, 1], normals[i, 2]
-        for t in range(start, stop):
-            j = indices[t]
-            if j == i:
-                continue
-            fy, fx, f2, f3, _ = _pair(
-                pix, piy, piz, nix, niy, niz,
-                points[j, 0], points[j, 1], points[j, 2],
-                normals[j, 0], normals[j, 1], normals[j, 2],
-            )  # fmt: skip
-            counts[i, _bin_theta(fy, fx, n_bins)] += 1
-            counts[i, n_bins + _bin_cosine(f2, n_bins)] += 1
-            counts[i, 2 * n_bins + _bin_cosine(f3, n_bins)] += 1
+        m_max = max(m_max, indptr[i + 1] - indptr[i])
+    Q = np.empty((min(m_max, ROW_MIN), 6, LANES), dtype=np.float32)
+    code = np.empty(max(LANES, m_max), dtype=np.int64)
+    good = np.empty(max(LANES, m_max), dtype=np.bool_)
+    i = lo
+    while i < hi:
+        m = indptr[i + 1] - indptr[i]
+        if m >= ROW_MIN:
+            start = indptr[i]
+            pix, piy, piz = points[i, 0], points[i, 1], points[i, 2]
+            nix, niy, niz = normals[i, 0], normals[i, 1], normals[i, 2]
+            for t in range(m):
+                j = indices[start + t]
+                code[t], good[t] = _fast_code(
+                    pix, piy, piz, nix, niy, niz,
+                    points[j, 0], points[j, 1], points[j, 2],
+                    normals[j, 0], normals[j, 1], normals[j, 2],
+                    nb, margin,
+                )  # fmt: skip
+            for t in range(m):
+                j = indices[start + t]
+                if j == i:
+                    continue
+                c = code[t]
+                if not good[t]:
+                    c = _exact_code(
+                        pix, piy, piz, nix, niy, niz,
+                        points[j, 0], points[j, 1], points[j, 2],
+                        normals[j, 0], normals[j, 1], normals[j, 2],
+                        n_bins,
+                    )  # fmt: skip
+                counts[i, c % n_bins] += 1
+                counts[i, n_bins + (c // n_bins) % n_bins] += 1
+                counts[i, 2 * n_bins + c // (n_bins * n_bins)] += 1
+            i += 1
+            continue
+        e = _run_end(indptr, i, hi)
+        _gather_run(points, normals, indptr, indices, i, e - i, m, Q)
+        for t in range(m):
+            for lane in range(e - i):
+                code[lane], good[lane] = _fast_code(
+                    points[i + lane, 0], points[i + lane, 1], points[i + lane, 2],
+                    normals[i + lane, 0], normals[i + lane, 1], normals[i + lane, 2],
+                    Q[t, 0, lane], Q[t, 1, lane], Q[t, 2, lane],
+                    Q[t, 3, lane], Q[t, 4, lane], Q[t, 5, lane],
+                    nb, margin,
+                )  # fmt: skip
+            for lane in range(e - i):
+                k = i + lane
+                if indices[indptr[k] + t] == k:
+                    continue
+                c = code[lane]
+                if not good[lane]:
+                    c = _exact_code(
+                        points[k, 0], points[k, 1], points[k, 2],
+                        normals[k, 0], normals[k, 1], normals[k, 2],
+                        Q[t, 0, lane], Q[t, 1, lane], Q[t, 2, lane],
+                        Q[t, 3, lane], Q[t, 4, lane], Q[t, 5, lane],
+                        n_bins,
+                    )  # fmt: skip
+                counts[k, c % n_bins] += 1
+                counts[k, n_bins + (c // n_bins) % n_bins] += 1
+                counts[k, 2 * n_bins + c // (n_bins * n_bins)] += 1
+        i = e
 
 
 def increment_sums(max_pairs):

@@ -274,3 +274,66 @@ def test_fast_theta_bin_equals_atan2f_bin():
         + z * (-0.3302995 + z * (0.1801410 + z * (-0.0851330 + z * 0.0208351)))
     )
     assert np.abs(poly - np.arctan(a)).max() < 2e-5
+
+
+def test_simd_kernels_equal_the_scalar_pair_path():
+    # pfh_rows/spfh_rows bin most pairs in SIMD lanes and send the doubtful
+    # ones (swap ties, f1 near an edge, zero distances, NaN) through _pair:
+    # the result must be the scalar path's, in both layouts (small
+    # neighbourhoods side by side, large ones one point at a time)
+    from numba import njit
+
+    from skpcd.features._pfh import _spfh_counts
+    from skpcd.features._pfh_kernels import ROW_MIN, _exact_code
+
+    @njit
+    def scalar(p, n, indptr, indices, n_bins, pfh, spfh):
+        for i in range(len(indptr) - 1):
+            s, e = indptr[i], indptr[i + 1]
+            m = e - s
+            if m > 1:
+                incr = np.float32(100.0) / np.float32(m * (m - 1) // 2)
+            for a in range(s, e):
+                ia = indices[a]
+                for b in range(s, e):
+                    ib = indices[b]
+                    if b < a:
+                        c = _exact_code(
+                            p[ia, 0], p[ia, 1], p[ia, 2], n[ia, 0], n[ia, 1], n[ia, 2],
+                            p[ib, 0], p[ib, 1], p[ib, 2], n[ib, 0], n[ib, 1], n[ib, 2],
+                            n_bins,
+                        )  # fmt: skip
+                        pfh[i, c] += incr
+                    if a == s and ib != i:
+                        c = _exact_code(
+                            p[i, 0], p[i, 1], p[i, 2], n[i, 0], n[i, 1], n[i, 2],
+                            p[ib, 0], p[ib, 1], p[ib, 2], n[ib, 0], n[ib, 1], n[ib, 2],
+                            n_bins,
+                        )  # fmt: skip
+                        spfh[i, c % n_bins] += 1
+                        spfh[i, n_bins + (c // n_bins) % n_bins] += 1
+                        spfh[i, 2 * n_bins + c // (n_bins * n_bins)] += 1
+
+    rng = np.random.default_rng(7)
+    plane = np.c_[rng.uniform(0, 2, (300, 2)), np.zeros(300)]
+    sphere = rng.normal(size=(300, 3))
+    sphere /= np.linalg.norm(sphere, axis=1, keepdims=True)
+    pts = np.vstack([plane, sphere, plane[:40]]).astype(F)  # 40 duplicates
+    up = np.tile([0, 0, 1], (300, 1))
+    normals = np.vstack([up, sphere, up[:40]]).astype(F)
+    normals[5] = np.nan
+    normals[7] = [0, 0, -1]  # antiparallel: |a1| == |a2| ties
+    # k nearest of varying sizes, and radii with 24+ neighbours
+    searches = [{"n_neighbors": 10}, {"n_neighbors": 3}, {"radius": 0.35}]
+    for search in searches:
+        nb = compute_neighborhoods(pts, **search)
+        if "radius" in search:
+            assert (nb.sizes >= ROW_MIN).mean() > 0.3 and (nb.sizes < ROW_MIN).any()
+        for n_bins in (5, 11):
+            got = compute_pfh(pts, normals, neighborhoods=nb, n_bins=n_bins)
+            ref = np.zeros_like(got)
+            counts = np.zeros((len(pts), 3 * n_bins), np.int64)
+            scalar(pts, normals, nb.indptr, nb.indices, n_bins, ref, counts)
+            np.testing.assert_array_equal(got, ref)
+            got_counts, _ = _spfh_counts(pts, normals, nb, n_bins, None)
+            np.testing.assert_array_equal(got_counts, counts)
