@@ -1,6 +1,13 @@
 """Datasets: synthetic generators and the embedded default objects."""
 
+from skpcd.datasets._primitives import PRIMITIVES, make_primitives
 from skpcd.datasets._random import make_point_clouds
 from skpcd.datasets._urban import URBAN_CLASSES, make_urban_objects
 
-__all__ = ["URBAN_CLASSES", "make_point_clouds", "make_urban_objects"]
+__all__ = [
+    "PRIMITIVES",
+    "URBAN_CLASSES",
+    "make_point_clouds",
+    "make_primitives",
+    "make_urban_objects",
+]

@@ -446,8 +446,10 @@ def increment_sums(max_pairs):
     return table
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _spfh_value(table, n_pairs, c):
+    """PCL's float32 sum of ``c`` increments of ``100 / n_pairs``. Inlined:
+    a function taking an array costs atomic reference counting per call."""
     if c == 0:
         return F0
     if n_pairs < len(table):
@@ -468,9 +470,10 @@ def spfh_values(lo, hi, counts, indptr, table, out):
             out[i, b] = _spfh_value(table, n_pairs, counts[i, b])
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _sqdist32(points, i, j):
-    """FLANN's ``L2_Simple`` in float32: ((0 + dx**2) + dy**2) + dz**2."""
+    """FLANN's ``L2_Simple`` in float32: ((0 + dx**2) + dy**2) + dz**2.
+    Inlined (it takes an array)."""
     dx = points[i, 0] - points[j, 0]
     dy = points[i, 1] - points[j, 1]
     dz = points[i, 2] - points[j, 2]

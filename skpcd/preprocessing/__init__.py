@@ -1,13 +1,16 @@
-"""Preprocessing of point clouds: spacing, neighbourhoods, normals."""
+"""Preprocessing of point clouds: spacing, sampling, neighbourhoods, normals."""
 
 from skpcd.preprocessing._neighbors import Neighborhoods, compute_neighborhoods
 from skpcd.preprocessing._normals import NormalEstimator, estimate_normals
+from skpcd.preprocessing._sampling import GridSampler, grid_sample
 from skpcd.preprocessing._spacing import point_spacing
 
 __all__ = [
+    "GridSampler",
     "Neighborhoods",
     "NormalEstimator",
     "compute_neighborhoods",
     "estimate_normals",
+    "grid_sample",
     "point_spacing",
 ]

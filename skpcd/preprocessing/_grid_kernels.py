@@ -171,6 +171,52 @@ def _block(
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _insert(bd, bi, count, k, d2, j):
+    """Insert (d2, j) into the buffer of the ``count`` best of at most ``k``,
+    sorted by (distance, index); returns the new count. Inlined (arrays)."""
+    if count < k:
+        pos = count
+        count += 1
+    elif d2 < bd[k - 1] or (d2 == bd[k - 1] and j < bi[k - 1]):
+        pos = k - 1
+    else:
+        return count
+    while pos > 0 and (bd[pos - 1] > d2 or (bd[pos - 1] == d2 and bi[pos - 1] > j)):
+        bd[pos] = bd[pos - 1]
+        bi[pos] = bi[pos - 1]
+        pos -= 1
+    bd[pos] = d2
+    bi[pos] = j
+    return count
+
+
+@njit(cache=True, nogil=True)
+def knn_brute(lo, hi, which, cloud, xyz, cloud_ptr, indptr, indices, sqdist):
+    """k nearest neighbours of the points ``which[lo:hi]`` (of clouds
+    ``cloud``) by scanning their whole cloud: for a few isolated points."""
+    k_max = 1
+    for p in range(lo, hi):
+        i = which[p]
+        k_max = max(k_max, indptr[i + 1] - indptr[i])
+    bd = np.empty(k_max)
+    bi = np.empty(k_max, dtype=np.int64)
+    for p in range(lo, hi):
+        i = which[p]
+        c = cloud[p]
+        kc = indptr[i + 1] - indptr[i]
+        bd[0] = -1.0
+        bi[0] = i
+        count = 1
+        for j in range(cloud_ptr[c], cloud_ptr[c + 1]):
+            if j != i:
+                ex = xyz[j, 0] - xyz[i, 0]
+                ey = xyz[j, 1] - xyz[i, 1]
+                ez = xyz[j, 2] - xyz[i, 2]
+                count = _insert(bd, bi, count, kc, ex * ex + ey * ey + ez * ez, j)
+        _write_row(indices, sqdist, indptr[i], i, bi, bd, kc)
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _write_row(indices, sqdist, base, i, bi, bd, m):
     """Store a sorted row, the point first at distance 0; inlined (arrays)."""
     indices[base] = i
@@ -247,22 +293,7 @@ def knn_cells(
                         ey = xs[t, 1] - qy
                         ez = xs[t, 2] - qz
                         d2 = ex * ex + ey * ey + ez * ez
-                        # insertion into the sorted buffer of the k best
-                        if count < kc:
-                            pos = count
-                            count += 1
-                        elif d2 < bd[kc - 1] or (d2 == bd[kc - 1] and j < bi[kc - 1]):
-                            pos = kc - 1
-                        else:
-                            continue
-                        while pos > 0 and (
-                            bd[pos - 1] > d2 or (bd[pos - 1] == d2 and bi[pos - 1] > j)
-                        ):
-                            bd[pos] = bd[pos - 1]
-                            bi[pos] = bi[pos - 1]
-                            pos -= 1
-                        bd[pos] = d2
-                        bi[pos] = j
+                        count = _insert(bd, bi, count, kc, d2, j)
                 # distance from the query to the space outside the scanned cells
                 bound = np.inf
                 if cx - s > 0:

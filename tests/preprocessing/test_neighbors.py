@@ -59,8 +59,21 @@ def _assert_same(a, b, ties_ok=False):
         np.testing.assert_array_equal(a.indices, b.indices)
 
 
-@pytest.mark.parametrize("search", [{"n_neighbors": 10}, {"radius": 0.15}])
-def test_grid_equals_kd_tree_on_random_and_clustered_clouds(search):
+@pytest.mark.parametrize(
+    "search, brute_work",
+    [
+        ({"n_neighbors": 10}, None),  # isolated points by brute force
+        ({"n_neighbors": 10}, 0),  # coarser grids, then cKDTree
+        ({"radius": 0.15}, None),
+    ],
+)
+def test_grid_equals_kd_tree_on_random_and_clustered_clouds(
+    search, brute_work, monkeypatch
+):
+    from skpcd.preprocessing import _neighbors
+
+    if brute_work is not None:
+        monkeypatch.setattr(_neighbors, "_BRUTE_WORK", brute_work)
     rng = np.random.default_rng(3)
     pts = np.vstack(
         [
