@@ -4,8 +4,14 @@ import pytest
 from sklearn.utils import estimator_checks as sk
 
 from skpcd.datasets import make_point_clouds, make_urban_objects
-from skpcd.features import FPFHTransformer, PFHTransformer, ShapeFeatures
-from skpcd.preprocessing import NormalEstimator
+from skpcd.features import (
+    FPFHTransformer,
+    ImprovedPFHTransformer,
+    OverallDescriptor,
+    PFHTransformer,
+    ShapeFeatures,
+)
+from skpcd.preprocessing import GridSampler, NormalEstimator
 from skpcd.utils.estimator_checks import ragged_checks
 
 # Estimators taking a list of clouds as X; those taking 2-D X go through
@@ -17,6 +23,12 @@ RAGGED = [
     FPFHTransformer(n_neighbors=8),
     PFHTransformer(radius=0.3, pooling="mean", undefined="drop"),
     FPFHTransformer(n_neighbors=8, convention="open3d", pooling="max"),
+    ImprovedPFHTransformer(n_neighbors=8),
+    ImprovedPFHTransformer("fpfh", middle="bbox_center", undefined="zero"),
+    OverallDescriptor(),
+    OverallDescriptor(box="obb_xy"),
+    GridSampler(voxel_size=0.2),
+    GridSampler(),
 ]
 
 # sklearn checks that need no data and therefore apply to ragged estimators.

@@ -1,5 +1,7 @@
 """Descriptors of segments and points."""
 
+from skpcd.features._improved import ImprovedPFHTransformer
+from skpcd.features._overall import OverallDescriptor, box_dimensions
 from skpcd.features._pfh import (
     FPFHTransformer,
     PFHTransformer,
@@ -10,8 +12,11 @@ from skpcd.features._shape import ShapeFeatures, shape_features
 
 __all__ = [
     "FPFHTransformer",
+    "ImprovedPFHTransformer",
+    "OverallDescriptor",
     "PFHTransformer",
     "ShapeFeatures",
+    "box_dimensions",
     "compute_fpfh",
     "compute_pfh",
     "shape_features",

@@ -5,6 +5,7 @@ import typing
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin, _fit_context
 
+from skpcd.features._overall import box_dimensions
 from skpcd.utils import check_point_clouds
 
 __all__ = ["ShapeFeatures", "shape_features"]
@@ -53,12 +54,8 @@ def shape_features(points):
     n = len(xyz)
     centred = xyz - xyz.mean(axis=0)
     # horizontal principal axes give an oriented footprint
-    cov_xy = centred[:, :2].T @ centred[:, :2] / n
-    _, vec_xy = np.linalg.eigh(cov_xy)
-    proj = centred[:, :2] @ vec_xy[:, ::-1]
-    length, width = np.ptp(proj, axis=0)
+    length, width, height = box_dimensions(xyz, "obb_xy")
     z = xyz[:, 2]
-    height = float(np.ptp(z))
     area = length * width
     cov = centred.T @ centred / n
     evals, evecs = np.linalg.eigh(cov)

@@ -50,3 +50,26 @@ def test_make_point_clouds_shapes():
     assert all(len(c) == 7 for c in make_point_clouds(3, n_points=7, random_state=0))
     with pytest.raises(ValueError):
         make_point_clouds(2, n_columns=2)
+
+
+def test_make_primitives_shapes_sizes_and_seed():
+    from skpcd.datasets import PRIMITIVES, make_primitives
+
+    clouds, labels = make_primitives(3, n_points=(100, 200), random_state=0)
+    assert len(clouds) == 18 and sorted(set(labels)) == sorted(PRIMITIVES)
+    assert all(100 <= len(c) <= 200 and c.shape[1] == 3 for c in clouds)
+    again, _ = make_primitives(3, n_points=(100, 200), random_state=0)
+    assert all(np.array_equal(a, b) for a, b in zip(clouds, again))
+    # noiseless spheres lie on a sphere, cylinders have a constant radius
+    clouds, labels = make_primitives(
+        2, shapes=["sphere", "plane"], noise=0.0, random_state=1
+    )
+    sphere = clouds[0] - clouds[0].mean(axis=0)
+    r = np.linalg.norm(sphere, axis=1)
+    assert r.std() < 0.05 * r.mean()
+    plane = clouds[1] - clouds[1].mean(axis=0)
+    assert np.linalg.svd(plane, compute_uv=False)[2] < 1e-9
+    with pytest.raises(ValueError, match="unknown shapes"):
+        make_primitives(1, shapes=["torus"])
+    with pytest.raises(ValueError, match="n_per_shape"):
+        make_primitives(0)

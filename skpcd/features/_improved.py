@@ -1,0 +1,234 @@
+"""Improved PFH and FPFH with a feature-level normal (Wang et al., 2023)."""
+
+import typing
+from numbers import Integral, Real
+
+import numpy as np
+from sklearn.base import BaseEstimator, TransformerMixin, _fit_context
+from sklearn.utils._param_validation import Interval, StrOptions
+
+from skpcd.preprocessing._normals import _normals_f32, pack_neighborhoods
+from skpcd.utils import check_point_clouds
+from skpcd.utils._parallel import parallel_rows
+
+__all__ = ["ImprovedPFHTransformer"]
+
+MIDDLES = ("centroid", "bbox_center")
+
+
+class ImprovedPFHTransformer(TransformerMixin, BaseEstimator):
+    """Improved PFH (or FPFH) of each segment, with a feature-level normal.
+
+    Wang et al. (2023), section 3.3: the classic PFH of a smooth surface
+    (plane, cylinder, sphere) puts nearly all pairs in one bin, because
+    neighbouring normals are nearly parallel. The improved descriptor
+    compares every point's normal ``n_s`` with one normal ``n_m`` for the
+    whole segment: ``n_m`` starts at the segment's middle point ``p_m`` and
+    points to the point of the segment farthest from it. The PCL pair
+    features of ``(p_m, n_m)`` and ``(p_s, n_s)`` for every point ``p_s``
+    are binned like PCL's PFH (``n_bins ** 3`` bins) or, with
+    ``variant="fpfh"``, like its SPFH (three blocks of ``n_bins``), and
+    normalised to sum to 100 (per block for ``"fpfh"``). One row per
+    segment, O(n) after the normals.
+
+    Read more in the :ref:`User Guide <smooth_shapes>`.
+
+    Parameters
+    ----------
+    variant : {"pfh", "fpfh"}, default="pfh"
+        ``"pfh"``: ``n_bins ** 3`` joint bins (125 by default, the paper's
+        improved PFH); ``"fpfh"``: ``3 * n_bins`` (33 by default, its
+        improved FPFH).
+    n_bins : int, default=None
+        Bins per feature; None means 5 for ``"pfh"``, 11 for ``"fpfh"``.
+    middle : {"centroid", "bbox_center"}, default="centroid"
+        The middle point ``p_m``: the mean of the points, or the centre of
+        the axis-aligned bounding box. The centroid is the default: it does
+        not depend on how the segment is oriented (the box's centre does)
+        and it scored at least as well in the smooth-shape experiment of
+        the user guide.
+    n_neighbors : int, default=None
+        k for the normals (PCA, PCL's rules); when neither ``n_neighbors``
+        nor ``radius`` is given, k = 10.
+    radius : float, default=None
+        Radius for the normals instead (the paper uses 0.9 m).
+    undefined : {"nan", "zero"}, default="nan"
+        The row of a segment whose descriptor is undefined: no point has a
+        normal (fewer than 3 points, collinear points), or all points are
+        at the middle point.
+    n_jobs : int, default=None
+        Threads for the neighbour search, the normals and the descriptor.
+
+    Attributes
+    ----------
+    n_features_in_ : int
+        Columns of the clouds seen in :meth:`fit`.
+    n_output_features_ : int
+        Width of the descriptor.
+
+    See Also
+    --------
+    PFHTransformer : The classic per-point PFH.
+    OverallDescriptor : The segment's box and volume.
+
+    Notes
+    -----
+    *Ties.* When several points are equally far from ``p_m``, ``n_m``
+    points to the one with the smallest (x, y, z), so the result does not
+    depend on the order of the points.
+
+    *Normal signs.* An estimated normal has no intrinsic sign, and PCL's
+    rule (face a viewpoint) changes with the segment's position. Each point
+    therefore adds half a count with ``n_s`` and half with ``-n_s``: the
+    descriptor depends on the normal's line only, and is invariant to any
+    rigid motion of the segment (up to float rounding at bin edges).
+
+    *Points.* Points without a normal are left out; the histogram is
+    normalised over the others.
+
+    References
+    ----------
+    .. [1] C. Wang, X. Xiong, X. Zhang, L. Liu, W. Tan, X. Liu, H. Yang, "A 3D
+       Point Cloud Feature Identification Method Based on Improved Point
+       Feature Histogram Descriptor", Electronics 12, 3736, 2023.
+
+    Examples
+    --------
+    >>> from skpcd.datasets import make_primitives
+    >>> from skpcd.features import ImprovedPFHTransformer
+    >>> clouds, labels = make_primitives(2, n_points=300, random_state=0)
+    >>> ImprovedPFHTransformer().fit_transform(clouds).shape
+    (12, 125)
+    >>> ImprovedPFHTransformer(variant="fpfh").fit_transform(clouds).shape
+    (12, 33)
+    """
+
+    _parameter_constraints: typing.ClassVar[dict] = {
+        "variant": [StrOptions({"pfh", "fpfh"})],
+        "n_bins": [Interval(Integral, 2, None, closed="left"), None],
+        "middle": [StrOptions(set(MIDDLES))],
+        "n_neighbors": [Interval(Integral, 3, None, closed="left"), None],
+        "radius": [Interval(Real, 0, None, closed="neither"), None],
+        "undefined": [StrOptions({"nan", "zero"})],
+        "n_jobs": [Integral, None],
+    }
+
+    def __init__(
+        self,
+        variant="pfh",
+        *,
+        n_bins=None,
+        middle="centroid",
+        n_neighbors=None,
+        radius=None,
+        undefined="nan",
+        n_jobs=None,
+    ):
+        self.variant = variant
+        self.n_bins = n_bins
+        self.middle = middle
+        self.n_neighbors = n_neighbors
+        self.radius = radius
+        self.undefined = undefined
+        self.n_jobs = n_jobs
+
+    def _bins(self):
+        if self.n_bins is not None:
+            return int(self.n_bins)
+        return 5 if self.variant == "pfh" else 11
+
+    def _width(self):
+        b = self._bins()
+        return b**3 if self.variant == "pfh" else 3 * b
+
+    def _validate(self, X):
+        if self.n_neighbors is not None and self.radius is not None:
+            raise ValueError(
+                "give n_neighbors or radius, not both "
+                f"(n_neighbors={self.n_neighbors}, radius={self.radius})"
+            )
+        return check_point_clouds(X)
+
+    @_fit_context(prefer_skip_nested_validation=True)
+    def fit(self, X, y=None):
+        """Check the parameters and the clouds; nothing is learned.
+
+        Parameters
+        ----------
+        X : sequence of ndarray of shape (n_points_i, 3+)
+            The segments.
+        y : None
+            Ignored.
+
+        Returns
+        -------
+        self : ImprovedPFHTransformer
+            The transformer.
+        """
+        clouds = self._validate(X)
+        self.n_features_in_ = clouds[0].shape[1]
+        self.n_output_features_ = self._width()
+        return self
+
+    def transform(self, X):
+        """The improved descriptor of every segment.
+
+        Parameters
+        ----------
+        X : sequence of ndarray of shape (n_points_i, 3+)
+            The segments; only xyz is used.
+
+        Returns
+        -------
+        descriptors : ndarray of shape (n_segments, n_output_features_)
+            One row per segment, summing to 100 (per block for ``"fpfh"``);
+            undefined segments get NaN or zeros (``undefined``).
+        """
+        from skpcd.features._pfh_kernels import improved_rows
+
+        clouds = self._validate(X)
+        k = self.n_neighbors
+        if k is None and self.radius is None:
+            k = 10
+        xyz, offsets, nb = pack_neighborhoods(
+            clouds, n_neighbors=k, radius=self.radius, n_jobs=self.n_jobs,
+            with_sqdist=False,
+        )  # fmt: skip
+        p = xyz.astype(np.float32)
+        n = _normals_f32(p, nb, np.zeros(3), self.n_jobs)[0]
+        del nb
+        n_bins, mode = self._bins(), 0 if self.variant == "pfh" else 1
+        out = np.zeros((len(clouds), self._width()))
+        middle = MIDDLES.index(self.middle)
+        args = (offsets, xyz, p, n, middle, n_bins, mode, out)
+        parallel_rows(improved_rows, len(clouds), self.n_jobs, *args)
+        # counts to percentages: per row, or per block of the "fpfh" variant
+        blocks = out.reshape(len(out), 1 if mode == 0 else 3, -1)
+        total = blocks.sum(axis=2, keepdims=True)
+        defined = (total > 0).all(axis=(1, 2))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            blocks *= 100.0 / total
+        out[~defined] = np.nan if self.undefined == "nan" else 0.0
+        return out
+
+    def get_feature_names_out(self, input_features=None):
+        """Names of the output columns: ``improved_pfh0``, ``improved_pfh1``...
+
+        Parameters
+        ----------
+        input_features : None
+            Ignored.
+
+        Returns
+        -------
+        names : ndarray of str
+            One name per bin.
+        """
+        prefix = f"improved_{self.variant}"
+        return np.asarray([f"{prefix}{i}" for i in range(self._width())], dtype=object)
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.input_tags.two_d_array = False
+        tags.requires_fit = False
+        return tags
