@@ -180,9 +180,10 @@ class ImprovedPFHTransformer(TransformerMixin, BaseEstimator):
 
         Returns
         -------
-        descriptors : ndarray of shape (n_segments, n_output_features_)
-            One row per segment, summing to 100 (per block for ``"fpfh"``);
-            undefined segments get NaN or zeros (``undefined``).
+        descriptors : ndarray of shape (n_segments, n_output_features)
+            One row per segment (``n_bins ** 3`` or ``3 * n_bins`` columns),
+            summing to 100 (per block for ``"fpfh"``); undefined segments
+            get NaN or zeros (``undefined``).
         """
         from skpcd.features._pfh_kernels import improved_rows
 
