@@ -4,11 +4,12 @@ import typing
 from numbers import Integral, Real
 
 import numpy as np
-from sklearn.base import BaseEstimator, TransformerMixin, _fit_context
+from sklearn.base import _fit_context
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from skpcd.preprocessing._normals import _normals_f32, pack_neighborhoods
 from skpcd.utils import check_point_clouds
+from skpcd.utils._estimator import CloudTransformer
 from skpcd.utils._parallel import parallel_rows
 
 __all__ = ["ImprovedPFHTransformer"]
@@ -16,7 +17,7 @@ __all__ = ["ImprovedPFHTransformer"]
 MIDDLES = ("centroid", "bbox_center")
 
 
-class ImprovedPFHTransformer(TransformerMixin, BaseEstimator):
+class ImprovedPFHTransformer(CloudTransformer):
     """Improved PFH (or FPFH) of each segment, with a feature-level normal.
 
     Wang et al. (2023), section 3.3: the classic PFH of a smooth surface
@@ -227,9 +228,3 @@ class ImprovedPFHTransformer(TransformerMixin, BaseEstimator):
         """
         prefix = f"improved_{self.variant}"
         return np.asarray([f"{prefix}{i}" for i in range(self._width())], dtype=object)
-
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.input_tags.two_d_array = False
-        tags.requires_fit = False
-        return tags

@@ -4,10 +4,10 @@ import typing
 from numbers import Real
 
 import numpy as np
-from sklearn.base import BaseEstimator, TransformerMixin, _fit_context
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from skpcd.utils import check_point_clouds
+from skpcd.utils._estimator import CloudTransformer
 
 __all__ = ["OverallDescriptor", "box_dimensions"]
 
@@ -56,7 +56,7 @@ def box_dimensions(xyz, box="aabb"):
     return float(ext.max()), float(ext.min()), float(np.ptp(xyz[:, 2]))
 
 
-class OverallDescriptor(TransformerMixin, BaseEstimator):
+class OverallDescriptor(CloudTransformer):
     """The overall descriptor of each segment (Wang et al., 2023, section 3.4).
 
     Per segment: its extent (minimum and maximum x, y, z), the length, width
@@ -114,26 +114,6 @@ class OverallDescriptor(TransformerMixin, BaseEstimator):
         self.box = box
         self.min_extent = min_extent
 
-    @_fit_context(prefer_skip_nested_validation=True)
-    def fit(self, X, y=None):
-        """Check the clouds; nothing is learned.
-
-        Parameters
-        ----------
-        X : sequence of ndarray of shape (n_points_i, 3+)
-            The segments.
-        y : None
-            Ignored.
-
-        Returns
-        -------
-        self : OverallDescriptor
-            The transformer.
-        """
-        clouds = check_point_clouds(X)
-        self.n_features_in_ = clouds[0].shape[1]
-        return self
-
     def transform(self, X):
         """The overall descriptor of every segment.
 
@@ -175,9 +155,3 @@ class OverallDescriptor(TransformerMixin, BaseEstimator):
             height, volume, n_points, density``.
         """
         return np.asarray(OVERALL_NAMES, dtype=object)
-
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.input_tags.two_d_array = False
-        tags.requires_fit = False
-        return tags

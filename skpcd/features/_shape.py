@@ -3,10 +3,10 @@
 import typing
 
 import numpy as np
-from sklearn.base import BaseEstimator, TransformerMixin, _fit_context
 
 from skpcd.features._overall import box_dimensions
 from skpcd.utils import check_point_clouds
+from skpcd.utils._estimator import CloudTransformer
 
 __all__ = ["ShapeFeatures", "shape_features"]
 
@@ -107,7 +107,7 @@ def shape_features(points):
     )
 
 
-class ShapeFeatures(TransformerMixin, BaseEstimator):
+class ShapeFeatures(CloudTransformer):
     """Global shape features of each segment (size, eigenvalues, height profile).
 
     A fixed-length description of a whole segment that needs no
@@ -162,26 +162,6 @@ class ShapeFeatures(TransformerMixin, BaseEstimator):
     def __init__(self):
         pass
 
-    @_fit_context(prefer_skip_nested_validation=True)
-    def fit(self, X, y=None):
-        """Check the clouds; the features need no fitting.
-
-        Parameters
-        ----------
-        X : sequence of ndarray of shape (n_points_i, 3+)
-            The segments.
-        y : None
-            Ignored.
-
-        Returns
-        -------
-        self : ShapeFeatures
-            The transformer.
-        """
-        clouds = check_point_clouds(X)
-        self.n_features_in_ = clouds[0].shape[1]
-        return self
-
     def transform(self, X):
         """Compute the features of each segment.
 
@@ -212,9 +192,3 @@ class ShapeFeatures(TransformerMixin, BaseEstimator):
             The feature names.
         """
         return np.asarray(FEATURE_NAMES, dtype=object)
-
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.input_tags.two_d_array = False
-        tags.requires_fit = False
-        return tags

@@ -4,11 +4,11 @@ import typing
 from numbers import Real
 
 import numpy as np
-from sklearn.base import BaseEstimator, TransformerMixin, _fit_context
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from skpcd.preprocessing._spacing import point_spacing
 from skpcd.utils import check_point_clouds
+from skpcd.utils._estimator import CloudTransformer
 
 __all__ = ["GridSampler", "grid_sample"]
 
@@ -100,7 +100,7 @@ def grid_sample(points, voxel_size="auto", *, return_index=False):
     return points[index]
 
 
-class GridSampler(TransformerMixin, BaseEstimator):
+class GridSampler(CloudTransformer):
     """3D grid sampling of each cloud (Wang et al., 2023, section 3).
 
     Keeps, in every occupied cell of a cubic grid, the point closest to the
@@ -141,25 +141,8 @@ class GridSampler(TransformerMixin, BaseEstimator):
     def __init__(self, voxel_size="auto"):
         self.voxel_size = voxel_size
 
-    @_fit_context(prefer_skip_nested_validation=True)
-    def fit(self, X, y=None):
-        """Check the clouds; sampling needs no fitting.
-
-        Parameters
-        ----------
-        X : sequence of ndarray of shape (n_points_i, 3+)
-            The clouds.
-        y : None
-            Ignored.
-
-        Returns
-        -------
-        self : GridSampler
-            The transformer.
-        """
-        clouds = check_point_clouds(X, min_points=0)
-        self.n_features_in_ = clouds[0].shape[1]
-        return self
+    def _validate(self, X):
+        return check_point_clouds(X, min_points=0)
 
     def transform(self, X):
         """Sample every cloud.
@@ -174,11 +157,4 @@ class GridSampler(TransformerMixin, BaseEstimator):
         sampled : list of ndarray of shape (n_kept_i, n_columns_i)
             The kept points of each cloud, in their original order.
         """
-        clouds = check_point_clouds(X, min_points=0)
-        return [grid_sample(c, self.voxel_size) for c in clouds]
-
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.input_tags.two_d_array = False
-        tags.requires_fit = False
-        return tags
+        return [grid_sample(c, self.voxel_size) for c in self._validate(X)]
