@@ -166,8 +166,7 @@ class ImprovedPFHTransformer(CloudTransformer):
         self : ImprovedPFHTransformer
             The transformer.
         """
-        clouds = self._validate(X)
-        self.n_features_in_ = clouds[0].shape[1]
+        super().fit(X)
         self.n_output_features_ = self._width()
         return self
 

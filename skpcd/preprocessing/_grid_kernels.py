@@ -37,6 +37,12 @@ def _coord(x, origin, h, dim):
 
 
 @njit(cache=True, nogil=True)
+def _cell_xyz(key, ny, nz):
+    """Cell coordinates of ``key = (x * ny + y) * nz + z``."""
+    return key // (nz * ny), (key // nz) % ny, key % nz
+
+
+@njit(cache=True, nogil=True)
 def cell_keys(xyz, cloud_ptr, origin, h, dims, keys):
     """Key of every point's cell within its cloud, into ``keys``."""
     for c in range(len(cloud_ptr) - 1):
@@ -140,10 +146,7 @@ def _block(
     c = cell_cloud[cell]
     c_lo, c_hi = cloud_cells[c], cloud_cells[c + 1]
     nx, ny, nz = dims[c, 0], dims[c, 1], dims[c, 2]
-    key = cell_key[cell]
-    z = key % nz
-    y = (key // nz) % ny
-    x = key // (nz * ny)
+    x, y, z = _cell_xyz(cell_key[cell], ny, nz)
     if prev < 0 or cell != prev + 1 or cell_cloud[prev] != c:
         cur[:] = -1  # unknown: found by bisection when first needed
     n = 0
@@ -267,10 +270,7 @@ def knn_cells(
         c = cell_cloud[cell]
         c_lo, c_hi = cloud_cells[c], cloud_cells[c + 1]
         nx, ny, nz = dims[c, 0], dims[c, 1], dims[c, 2]
-        key = cell_key[cell]
-        cz = key % nz
-        cy = (key // nz) % ny
-        cx = key // (nz * ny)
+        cx, cy, cz = _cell_xyz(cell_key[cell], ny, nz)
         hc = h[c]
         for t0 in range(cell_start[cell], cell_start[cell + 1]):
             i = order[t0]

@@ -4,7 +4,6 @@ import typing
 from numbers import Integral, Real
 
 import numpy as np
-from sklearn.base import BaseEstimator, TransformerMixin, _fit_context
 from sklearn.utils._param_validation import Interval
 
 from skpcd.preprocessing._neighbors import (
@@ -12,6 +11,7 @@ from skpcd.preprocessing._neighbors import (
     search_packed,
 )
 from skpcd.utils import check_point_clouds
+from skpcd.utils._estimator import CloudTransformer
 from skpcd.utils._parallel import parallel_rows
 
 __all__ = ["NormalEstimator", "estimate_normals"]
@@ -136,7 +136,7 @@ def _normals_f32(points, neighborhoods, viewpoint, n_jobs):
     return normals, curvature
 
 
-class NormalEstimator(TransformerMixin, BaseEstimator):
+class NormalEstimator(CloudTransformer):
     """Append estimated normals (and curvature) to each cloud.
 
     The pipeline form of :func:`estimate_normals`: each cloud ``(n, 3+)``
@@ -202,26 +202,10 @@ class NormalEstimator(TransformerMixin, BaseEstimator):
         self.include_curvature = include_curvature
         self.n_jobs = n_jobs
 
-    @_fit_context(prefer_skip_nested_validation=True)
-    def fit(self, X, y=None):
-        """Check the parameters and the clouds; nothing is learned.
-
-        Parameters
-        ----------
-        X : sequence of ndarray of shape (n_points_i, 3+)
-            The clouds.
-        y : None
-            Ignored.
-
-        Returns
-        -------
-        self : NormalEstimator
-            The estimator.
-        """
+    def _validate(self, X):
         clouds = check_point_clouds(X)
         _check_viewpoint(self.viewpoint)
-        self.n_features_in_ = clouds[0].shape[1]
-        return self
+        return clouds
 
     def transform(self, X):
         """Estimate the normals of every cloud.
@@ -245,12 +229,6 @@ class NormalEstimator(TransformerMixin, BaseEstimator):
         cols = [xyz, normals] + ([curvature[:, None]] if self.include_curvature else [])
         out = np.hstack(cols)
         return [out[offsets[i] : offsets[i + 1]] for i in range(len(clouds))]
-
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.input_tags.two_d_array = False
-        tags.requires_fit = False
-        return tags
 
 
 def pack_neighborhoods(

@@ -6,6 +6,7 @@ from numbers import Real
 import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
 
+from skpcd.preprocessing._neighbors import _check_points
 from skpcd.preprocessing._spacing import point_spacing
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
@@ -89,11 +90,7 @@ def grid_sample(points, voxel_size="auto", *, return_index=False):
     [[0.5, 0.5, 0.5], [1.5, 0.5, 0.5]]
     """
     points = np.asarray(points)
-    if points.ndim != 2 or points.shape[1] < 3:
-        raise ValueError(f"points must have shape (n_points, 3+), got {points.shape}")
-    xyz = np.asarray(points[:, :3], dtype=np.float64)
-    if not np.isfinite(xyz).all():
-        raise ValueError("points contain NaN or infinite coordinates")
+    xyz = _check_points(points)
     index = _grid_sample_indices(xyz, _voxel_size(xyz, voxel_size))
     if return_index:
         return points[index], index
