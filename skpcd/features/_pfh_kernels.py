@@ -364,6 +364,13 @@ def spfh_rows(lo, hi, points, normals, indptr, indices, n_bins, counts):
     Q = np.empty((min(m_max, ROW_MIN), 6, LANES), dtype=np.float32)
     code = np.empty(max(LANES, m_max), dtype=np.int64)
     good = np.empty(max(LANES, m_max), dtype=np.bool_)
+    A = np.empty((6, LANES), dtype=np.float32)
+    # each code's three columns, looked up: integer division is slow
+    col = np.empty((n_bins**3, 3), dtype=np.int64)
+    for c in range(n_bins**3):
+        col[c, 0] = c % n_bins
+        col[c, 1] = n_bins + (c // n_bins) % n_bins
+        col[c, 2] = 2 * n_bins + c // (n_bins * n_bins)
     i = lo
     while i < hi:
         m = indptr[i + 1] - indptr[i]
@@ -391,18 +398,24 @@ def spfh_rows(lo, hi, points, normals, indptr, indices, n_bins, counts):
                         normals[j, 0], normals[j, 1], normals[j, 2],
                         n_bins,
                     )  # fmt: skip
-                counts[i, c % n_bins] += 1
-                counts[i, n_bins + (c // n_bins) % n_bins] += 1
-                counts[i, 2 * n_bins + c // (n_bins * n_bins)] += 1
+                counts[i, col[c, 0]] += 1
+                counts[i, col[c, 1]] += 1
+                counts[i, col[c, 2]] += 1
             i += 1
             continue
         e = _run_end(indptr, i, hi)
         _gather_run(points, normals, indptr, indices, i, e - i, m, Q)
+        # the points themselves, lane by lane too: strided reads would keep
+        # the loop below out of SIMD registers
+        for lane in range(e - i):
+            for d in range(3):
+                A[d, lane] = points[i + lane, d]
+                A[3 + d, lane] = normals[i + lane, d]
         for t in range(m):
             for lane in range(e - i):
                 code[lane], good[lane] = _fast_code(
-                    points[i + lane, 0], points[i + lane, 1], points[i + lane, 2],
-                    normals[i + lane, 0], normals[i + lane, 1], normals[i + lane, 2],
+                    A[0, lane], A[1, lane], A[2, lane],
+                    A[3, lane], A[4, lane], A[5, lane],
                     Q[t, 0, lane], Q[t, 1, lane], Q[t, 2, lane],
                     Q[t, 3, lane], Q[t, 4, lane], Q[t, 5, lane],
                     nb, margin,
@@ -420,9 +433,9 @@ def spfh_rows(lo, hi, points, normals, indptr, indices, n_bins, counts):
                         Q[t, 3, lane], Q[t, 4, lane], Q[t, 5, lane],
                         n_bins,
                     )  # fmt: skip
-                counts[k, c % n_bins] += 1
-                counts[k, n_bins + (c // n_bins) % n_bins] += 1
-                counts[k, 2 * n_bins + c // (n_bins * n_bins)] += 1
+                counts[k, col[c, 0]] += 1
+                counts[k, col[c, 1]] += 1
+                counts[k, col[c, 2]] += 1
         i = e
 
 
@@ -493,6 +506,7 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out)
     distance, not rescaled.
     """
     width = 3 * n_bins
+    n_table = len(table)
     for i in range(lo, hi):
         s1 = s2 = s3 = 0.0
         k = 0
@@ -509,15 +523,31 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out)
                     out[i, b] += _spfh_value(table, n_pairs, counts[j, b]) * w64
                 continue
             weight = np.float32(1.0) / d
-            for b in range(width):
-                val = _spfh_value(table, n_pairs, counts[j, b]) * weight
-                if b < n_bins:
-                    s1 += val
-                elif b < 2 * n_bins:
-                    s2 += val
-                else:
-                    s3 += val
-                out[i, b] += val
+            if n_pairs < n_table:
+                # the three blocks side by side: three independent sums, each
+                # in PCL's order (neighbour by neighbour, bin by bin), and no
+                # branch on the counts (table[p, 0] is 0)
+                for b in range(n_bins):
+                    v1 = table[n_pairs, counts[j, b]] * weight
+                    v2 = table[n_pairs, counts[j, n_bins + b]] * weight
+                    v3 = table[n_pairs, counts[j, 2 * n_bins + b]] * weight
+                    s1 += v1
+                    s2 += v2
+                    s3 += v3
+                    out[i, b] += v1
+                    out[i, n_bins + b] += v2
+                    out[i, 2 * n_bins + b] += v3
+                continue
+            for b in range(n_bins):
+                v1 = _spfh_value(table, n_pairs, counts[j, b]) * weight
+                v2 = _spfh_value(table, n_pairs, counts[j, n_bins + b]) * weight
+                v3 = _spfh_value(table, n_pairs, counts[j, 2 * n_bins + b]) * weight
+                s1 += v1
+                s2 += v2
+                s3 += v3
+                out[i, b] += v1
+                out[i, n_bins + b] += v2
+                out[i, 2 * n_bins + b] += v3
         n_own = indptr[i + 1] - indptr[i] - 1
         if mode == 2:
             for b in range(width):
@@ -528,14 +558,12 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out)
         k1 = np.float32(100.0 / s1) if s1 != 0.0 else np.float32(s1)
         k2 = np.float32(100.0 / s2) if s2 != 0.0 else np.float32(s2)
         k3 = np.float32(100.0 / s3) if s3 != 0.0 else np.float32(s3)
-        for b in range(width):
-            if b < n_bins:
-                out[i, b] *= k1
-            elif b < 2 * n_bins:
-                out[i, b] *= k2
-            else:
-                out[i, b] *= k3
-            if mode == 1:
+        for b in range(n_bins):
+            out[i, b] *= k1
+            out[i, n_bins + b] *= k2
+            out[i, 2 * n_bins + b] *= k3
+        if mode == 1:
+            for b in range(width):
                 out[i, b] += _spfh_value(table, n_own, counts[i, b])
 
 

@@ -215,7 +215,9 @@ def knn_brute(lo, hi, which, cloud, xyz, cloud_ptr, indptr, indices, sqdist):
                 ex = xyz[j, 0] - xyz[i, 0]
                 ey = xyz[j, 1] - xyz[i, 1]
                 ez = xyz[j, 2] - xyz[i, 2]
-                count = _insert(bd, bi, count, kc, ex * ex + ey * ey + ez * ez, j)
+                d2 = ex * ex + ey * ey + ez * ez
+                if count < kc or d2 <= bd[kc - 1]:
+                    count = _insert(bd, bi, count, kc, d2, j)
         _write_row(indices, sqdist, indptr[i], i, bi, bd, kc)
 
 
@@ -286,14 +288,13 @@ def knn_cells(
             while True:
                 for r in range(n_runs):
                     for t in range(starts[r], stops[r]):
-                        j = order[t]
-                        if j == i:
-                            continue
                         ex = xs[t, 0] - qx
                         ey = xs[t, 1] - qy
                         ez = xs[t, 2] - qz
                         d2 = ex * ex + ey * ey + ez * ez
-                        count = _insert(bd, bi, count, kc, d2, j)
+                        # most candidates fail this test: the call stays rare
+                        if t != t0 and (count < kc or d2 <= bd[kc - 1]):
+                            count = _insert(bd, bi, count, kc, d2, order[t])
                 # distance from the query to the space outside the scanned cells
                 bound = np.inf
                 if cx - s > 0:
