@@ -130,9 +130,14 @@ def _spfh(p, n, nb, n_bins, n_jobs=None):
 
 def _fpfh_packed(p, n, nb, n_bins, convention, n_jobs):
     """SPFH (as pair counts) then FPFH kernels over float32 packed arrays."""
+    counts, table = _spfh_counts(p, n, nb, n_bins, n_jobs)
+    return _fpfh_from_counts(p, counts, table, nb, n_bins, convention, n_jobs)
+
+
+def _fpfh_from_counts(p, counts, table, nb, n_bins, convention, n_jobs):
+    """FPFH from the SPFH pair counts of :func:`_spfh_counts`."""
     from skpcd.features._pfh_kernels import fpfh_rows
 
-    counts, table = _spfh_counts(p, n, nb, n_bins, n_jobs)
     mode = FPFH_CONVENTIONS.index(convention)
     out = np.zeros((len(p), 3 * n_bins), dtype=np.float64 if mode == 2 else np.float32)
     args = (p, counts, nb.indptr, nb.indices, table, n_bins, mode, out)
@@ -281,7 +286,11 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
             del nnb
         del xyz  # the descriptors work in float32
         undefined = ~np.isfinite(n).all(axis=1) | (nb.sizes < 2)
-        out = self._kernel(p, n, nb)
+        # the kernel takes the normals out of the list: they are freed as
+        # soon as it no longer needs them (FPFH: after the SPFH)
+        normals = [n]
+        del n
+        out = self._kernel(p, normals, nb)
         return out, undefined, offsets
 
     def undefined_mask(self, X):
@@ -467,8 +476,8 @@ class PFHTransformer(_LocalDescriptor):
         self.pooling = pooling
         self.n_jobs = n_jobs
 
-    def _kernel(self, p, n, nb):
-        return _pfh_packed(p, n, nb, int(self.n_bins), self.n_jobs)
+    def _kernel(self, p, normals, nb):
+        return _pfh_packed(p, normals.pop(), nb, int(self.n_bins), self.n_jobs)
 
 
 class FPFHTransformer(_LocalDescriptor):
@@ -544,5 +553,8 @@ class FPFHTransformer(_LocalDescriptor):
         self.convention = convention
         self.n_jobs = n_jobs
 
-    def _kernel(self, p, n, nb):
-        return _fpfh_packed(p, n, nb, int(self.n_bins), self.convention, self.n_jobs)
+    def _kernel(self, p, normals, nb):
+        n_bins = int(self.n_bins)
+        counts, table = _spfh_counts(p, normals.pop(), nb, n_bins, self.n_jobs)
+        args = (p, counts, table, nb, n_bins, self.convention, self.n_jobs)
+        return _fpfh_from_counts(*args)

@@ -12,6 +12,8 @@ import math
 import numpy as np
 from numba import njit
 
+from skpcd.utils._numba import borrow, keep
+
 F0 = np.float32(0.0)
 F100 = np.float32(100.0)
 # PCL's d_pi_ = 1.0f / (2.0f * (float) M_PI), a float used in double arithmetic
@@ -277,12 +279,18 @@ def pfh_rows(lo, hi, points, normals, indptr, indices, n_bins, out):
     neighbourhoods and across points in small ones. Layout
     ``(n, n_bins**3)``, f1 fastest.
     """
+    points = borrow(points)
+    normals = borrow(normals)
+    indptr = borrow(indptr)
+    indices = borrow(indices)
+    out = borrow(out)
     nb = np.float64(n_bins)
     margin = nb * D_PI * 1e-4
     m_max = 1
     for i in range(lo, hi):
         m_max = max(m_max, indptr[i + 1] - indptr[i])
-    Q = np.empty((min(m_max, ROW_MIN), 6, LANES), dtype=np.float32)
+    q_own = np.empty((min(m_max, ROW_MIN), 6, LANES), dtype=np.float32)
+    Q = borrow(q_own)
     P = np.empty((6, m_max), dtype=np.float32)
     code = np.empty(max(LANES, m_max), dtype=np.int64)
     good = np.empty(max(LANES, m_max), dtype=np.bool_)
@@ -343,6 +351,7 @@ def pfh_rows(lo, hi, points, normals, indptr, indices, n_bins, out):
                         )  # fmt: skip
                     out[i + lane, c] += incr
         i = e
+    keep(q_own)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -356,12 +365,18 @@ def spfh_rows(lo, hi, points, normals, indptr, indices, n_bins, counts):
     with the point's own index are skipped. Pairs run in SIMD lanes as in
     :func:`pfh_rows`.
     """
+    points = borrow(points)
+    normals = borrow(normals)
+    indptr = borrow(indptr)
+    indices = borrow(indices)
+    counts = borrow(counts)
     nb = np.float64(n_bins)
     margin = nb * D_PI * 1e-4
     m_max = 1
     for i in range(lo, hi):
         m_max = max(m_max, indptr[i + 1] - indptr[i])
-    Q = np.empty((min(m_max, ROW_MIN), 6, LANES), dtype=np.float32)
+    q_own = np.empty((min(m_max, ROW_MIN), 6, LANES), dtype=np.float32)
+    Q = borrow(q_own)
     code = np.empty(max(LANES, m_max), dtype=np.int64)
     good = np.empty(max(LANES, m_max), dtype=np.bool_)
     A = np.empty((6, LANES), dtype=np.float32)
@@ -437,6 +452,7 @@ def spfh_rows(lo, hi, points, normals, indptr, indices, n_bins, counts):
                 counts[k, col[c, 1]] += 1
                 counts[k, col[c, 2]] += 1
         i = e
+    keep(q_own)
 
 
 def increment_sums(max_pairs):
@@ -477,6 +493,10 @@ def _spfh_value(table, n_pairs, c):
 @njit(cache=True, nogil=True)
 def spfh_values(lo, hi, counts, indptr, table, out):
     """Rows ``lo`` to ``hi`` of the SPFH as PCL's float32 values."""
+    counts = borrow(counts)
+    indptr = borrow(indptr)
+    table = borrow(table)
+    out = borrow(out)
     for i in range(lo, hi):
         n_pairs = indptr[i + 1] - indptr[i] - 1
         for b in range(counts.shape[1]):
@@ -505,6 +525,12 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out)
     float64 (``out`` float64), k counting the neighbours at a non-zero
     distance, not rescaled.
     """
+    points = borrow(points)
+    counts = borrow(counts)
+    indptr = borrow(indptr)
+    indices = borrow(indices)
+    table = borrow(table)
+    out = borrow(out)
     width = 3 * n_bins
     n_table = len(table)
     for i in range(lo, hi):

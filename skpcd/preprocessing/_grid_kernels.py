@@ -26,6 +26,8 @@ import math
 import numpy as np
 from numba import njit
 
+from skpcd.utils._numba import borrow, keep
+
 # Cells per axis stay below this, so a cell key fits in an int64.
 MAX_DIM = 1 << 20
 
@@ -197,12 +199,20 @@ def _insert(bd, bi, count, k, d2, j):
 def knn_brute(lo, hi, which, cloud, xyz, cloud_ptr, indptr, indices, sqdist):
     """k nearest neighbours of the points ``which[lo:hi]`` (of clouds
     ``cloud``) by scanning their whole cloud: for a few isolated points."""
+    which = borrow(which)
+    cloud = borrow(cloud)
+    xyz = borrow(xyz)
+    cloud_ptr = borrow(cloud_ptr)
+    indptr = borrow(indptr)
+    indices = borrow(indices)
+    sqdist = borrow(sqdist)
     k_max = 1
     for p in range(lo, hi):
         i = which[p]
         k_max = max(k_max, indptr[i + 1] - indptr[i])
-    bd = np.empty(k_max)
-    bi = np.empty(k_max, dtype=np.int64)
+    f_own = np.empty(k_max)
+    i_own = np.empty(k_max, dtype=np.int64)
+    bd, bi = borrow(f_own), borrow(i_own)
     for p in range(lo, hi):
         i = which[p]
         c = cloud[p]
@@ -219,6 +229,8 @@ def knn_brute(lo, hi, which, cloud, xyz, cloud_ptr, indptr, indices, sqdist):
                 if count < kc or d2 <= bd[kc - 1]:
                     count = _insert(bd, bi, count, kc, d2, j)
         _write_row(indices, sqdist, indptr[i], i, bi, bd, kc)
+    keep(f_own)
+    keep(i_own)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -244,23 +256,40 @@ def knn_cells(
     gives each point's k. With ``todo`` non-empty, only the points flagged
     there are answered. An empty ``sqdist`` is not filled. Rows of points
     that need more than ``max_shell`` shells are flagged in ``hard`` and not
-    filled. Everything runs inline here: a helper taking arrays would cost
-    atomic reference-count updates per call.
+    filled. Arrays are borrowed (:func:`~skpcd.utils._numba.borrow`): the
+    inlined helpers that take them cost no atomic reference counting.
     """
+    cells = borrow(cells)
+    xs = borrow(xs)
+    order = borrow(order)
+    cell_cloud = borrow(cell_cloud)
+    cell_key = borrow(cell_key)
+    cell_start = borrow(cell_start)
+    cloud_cells = borrow(cloud_cells)
+    origin = borrow(origin)
+    h = borrow(h)
+    dims = borrow(dims)
+    indptr = borrow(indptr)
+    todo = borrow(todo)
+    indices = borrow(indices)
+    sqdist = borrow(sqdist)
+    hard = borrow(hard)
     k_max = 1
     for p in range(lo, hi):
         cell = cells[p]
         for t in range(cell_start[cell], cell_start[cell + 1]):
             i = order[t]
             k_max = max(k_max, indptr[i + 1] - indptr[i])
-    bd = np.empty(k_max)
-    bi = np.empty(k_max, dtype=np.int64)
-    cur = np.empty(9, dtype=np.int64)
-    block_start = np.empty(9, dtype=np.int64)
-    block_stop = np.empty(9, dtype=np.int64)
     n_shell = 2 * (2 * max_shell + 1) ** 2
-    shell_start = np.empty(n_shell, dtype=np.int64)
-    shell_stop = np.empty(n_shell, dtype=np.int64)
+    # scratch: the k best, 9 column cursors, the runs of a block and a shell
+    f_own = np.empty(k_max)
+    i_own = np.empty(k_max + 27 + 2 * n_shell, dtype=np.int64)
+    bd, bi = borrow(f_own), borrow(i_own[:k_max])
+    cur = borrow(i_own[k_max : k_max + 9])
+    block_start = borrow(i_own[k_max + 9 : k_max + 18])
+    block_stop = borrow(i_own[k_max + 18 : k_max + 27])
+    shell_start = borrow(i_own[k_max + 27 : k_max + 27 + n_shell])
+    shell_stop = borrow(i_own[k_max + 27 + n_shell :])
     prev = -1
     for p in range(lo, hi):
         cell = cells[p]
@@ -366,6 +395,8 @@ def knn_cells(
                 starts, stops = shell_start, shell_stop
             if not hard[i]:
                 _write_row(indices, sqdist, indptr[i], i, bi, bd, kc)
+    keep(f_own)
+    keep(i_own)
 
 
 @njit(cache=True, nogil=True)
@@ -380,16 +411,28 @@ def ball_cells(
     sorted by (distance, index), the point first.
     """
     fill = len(indptr) > 0
+    xs = borrow(xs)
+    order = borrow(order)
+    cell_cloud = borrow(cell_cloud)
+    cell_key = borrow(cell_key)
+    cell_start = borrow(cell_start)
+    cloud_cells = borrow(cloud_cells)
+    dims = borrow(dims)
+    indptr = borrow(indptr)
+    counts = borrow(counts)
+    indices = borrow(indices)
+    sqdist = borrow(sqdist)
     k_max = 1
     if fill:
         for t in range(cell_start[lo], cell_start[hi]):
             i = order[t]
             k_max = max(k_max, indptr[i + 1] - indptr[i])
-    bd = np.empty(k_max)
-    bi = np.empty(k_max, dtype=np.int64)
-    cur = np.empty(9, dtype=np.int64)
-    starts = np.empty(9, dtype=np.int64)
-    stops = np.empty(9, dtype=np.int64)
+    f_own = np.empty(k_max)
+    i_own = np.empty(k_max + 27, dtype=np.int64)
+    bd, bi = borrow(f_own), borrow(i_own[:k_max])
+    cur = borrow(i_own[k_max : k_max + 9])
+    starts = borrow(i_own[k_max + 9 : k_max + 18])
+    stops = borrow(i_own[k_max + 18 :])
     for cell in range(lo, hi):
         n_runs = _block(
             cell, cell - 1 if cell > lo else -1, cell_cloud, cell_key, cell_start,
@@ -428,3 +471,5 @@ def ball_cells(
                     bd[b] = d
                     bi[b] = j
             _write_row(indices, sqdist, indptr[i], i, bi, bd, m)
+    keep(f_own)
+    keep(i_own)
