@@ -5,7 +5,12 @@ Every problem with a file on disk raises :class:`PointCloudFileError` (a
 :class:`FileNotFoundError`), and the message always starts with the path.
 """
 
-__all__ = ["MissingFileError", "NonFiniteWarning", "PointCloudFileError"]
+__all__ = [
+    "IncompatibleModelError",
+    "MissingFileError",
+    "NonFiniteWarning",
+    "PointCloudFileError",
+]
 
 
 class PointCloudFileError(ValueError):
@@ -42,3 +47,12 @@ class MissingFileError(PointCloudFileError, FileNotFoundError):
 
 class NonFiniteWarning(UserWarning):
     """Points with NaN or infinite coordinates were dropped while reading."""
+
+
+class IncompatibleModelError(PointCloudFileError):
+    """A saved model was written by another skpcd or scikit-learn release.
+
+    Pickled estimators are only safe to load with the versions that wrote
+    them; :func:`skpcd.io.load_model` raises this instead of guessing. The
+    message names both versions.
+    """

@@ -28,15 +28,23 @@ def test_info_bad_file_is_a_clean_error(tmp_path, capsys):
     assert "error" in err and str(path) in err and "Traceback" not in err
 
 
-def test_evaluate_folder(tmp_path, capsys):
+def _labelled_folder(folder, n_per_class=6, random_state=1):
     from skpcd.datasets import make_urban_objects
 
-    clouds, labels = make_urban_objects(n_per_class=6, random_state=1)
+    clouds, labels = make_urban_objects(
+        n_per_class=n_per_class, random_state=random_state
+    )
+    folder.mkdir(exist_ok=True)
     rows = ["file,label"]
     for i, (c, y) in enumerate(zip(clouds, labels)):
-        write_point_cloud(tmp_path / f"{i:03d}.xyz", c)
+        write_point_cloud(folder / f"{i:03d}.xyz", c)
         rows.append(f"{i:03d}.xyz,{y}")
-    (tmp_path / "labels.csv").write_text("\n".join(rows))
+    (folder / "labels.csv").write_text("\n".join(rows))
+    return labels
+
+
+def test_evaluate_folder(tmp_path, capsys):
+    _labelled_folder(tmp_path)
     assert main(["evaluate", str(tmp_path), "--folds", "3", "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "30 segments, 5 classes" in out
@@ -77,3 +85,66 @@ def test_console_entry_point_default_data_quiet_when_not_a_tty():
     assert "embedded synthetic urban objects" in proc.stdout
     assert "accuracy" in proc.stdout
     assert proc.stderr == ""  # no progress bar when not on a terminal
+
+
+def test_fit_predict_describe_round_trip(tmp_path, capsys):
+    import csv
+
+    train, test = tmp_path / "train", tmp_path / "test"
+    _labelled_folder(train, n_per_class=8, random_state=1)
+    truth = _labelled_folder(test, n_per_class=4, random_state=2)
+    (test / "labels.csv").unlink()  # predict needs no labels
+    model = tmp_path / "model.joblib"
+    assert main(["fit", str(train), "-o", str(model), "--quiet"]) == 0
+    assert "40 segments, 5 classes" in capsys.readouterr().out
+    out = tmp_path / "pred.csv"
+    assert main(["predict", str(model), str(test), "-o", str(out), "--quiet"]) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert [r["file"] for r in rows] == [f"{i:03d}.xyz" for i in range(20)]
+    probability = np.array([float(r["probability"]) for r in rows])
+    assert ((probability > 0) & (probability <= 1)).all()
+    accuracy = np.mean([r["label"] == y for r, y in zip(rows, truth)])
+    assert accuracy >= 0.8  # synthetic classes are well separated
+
+    npz = tmp_path / "d.npz"
+    args = ["describe", str(train), "-o", str(npz), "--quiet", "--local", "fpfh"]
+    assert main([*args, "--descriptors", "shape,overall,fpfh_mean"]) == 0
+    d = np.load(npz)
+    assert d["names"].tolist() == [f"{i:03d}.xyz" for i in range(40)]
+    assert len(d["labels"]) == 40
+    assert d["shape"].shape[0] == d["overall"].shape[0] == 40
+    assert d["fpfh_mean"].shape == (40, 33)
+    assert len(d["shape_columns"]) == d["shape"].shape[1]
+    assert d["fpfh_offsets"][-1] == len(d["fpfh"]) and d["fpfh"].shape[1] == 33
+
+
+def test_outputs_are_never_overwritten_without_asking(tmp_path, capsys):
+    _labelled_folder(tmp_path / "seg", n_per_class=3)
+    model = tmp_path / "model.joblib"
+    model.write_text("precious")
+    with pytest.raises(SystemExit, match="exists; pass --overwrite"):
+        main(["fit", str(tmp_path / "seg"), "-o", str(model)])
+    assert model.read_text() == "precious"
+    npz = tmp_path / "d.npz"
+    npz.write_text("precious")
+    with pytest.raises(SystemExit, match="exists"):
+        main(["describe", str(tmp_path / "seg"), "-o", str(npz)])
+    assert npz.read_text() == "precious"
+
+
+def test_describe_unknown_descriptor(tmp_path):
+    _labelled_folder(tmp_path, n_per_class=1)
+    with pytest.raises(SystemExit, match=r"unknown descriptor.*bogus"):
+        main(["describe", str(tmp_path), "-o", str(tmp_path / "x.npz"),
+              "--descriptors", "shape,bogus"])  # fmt: skip
+
+
+def test_predict_with_a_bad_model_file_is_a_clean_error(tmp_path, capsys):
+    _labelled_folder(tmp_path / "seg", n_per_class=1)
+    bad = tmp_path / "model.joblib"
+    bad.write_bytes(b"not a pickle")
+    out = tmp_path / "p.csv"
+    assert main(["predict", str(bad), str(tmp_path / "seg"), "-o", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "not a model file" in err and "Traceback" not in err
+    assert not out.exists()

@@ -344,6 +344,27 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
             return rows
         return np.vstack([_pool(block, self.pooling) for block in rows])
 
+    def get_feature_names_out(self, input_features=None):
+        """Names of the descriptor columns, ``pfh0``... or ``fpfh0``...
+
+        With ``pooling``, these name the columns of the one row per cloud
+        (so the transformer composes in a
+        :class:`~sklearn.pipeline.FeatureUnion`); without, the columns of
+        every per-point array.
+
+        Parameters
+        ----------
+        input_features : None
+            Ignored.
+
+        Returns
+        -------
+        names : ndarray of str
+            One name per bin.
+        """
+        prefix = type(self).__name__.removesuffix("Transformer").lower()
+        return np.asarray([f"{prefix}{i}" for i in range(self._width())], dtype=object)
+
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
         tags.input_tags.two_d_array = False
@@ -476,6 +497,9 @@ class PFHTransformer(_LocalDescriptor):
         self.pooling = pooling
         self.n_jobs = n_jobs
 
+    def _width(self):
+        return int(self.n_bins) ** 3
+
     def _kernel(self, p, normals, nb):
         return _pfh_packed(p, normals.pop(), nb, int(self.n_bins), self.n_jobs)
 
@@ -552,6 +576,9 @@ class FPFHTransformer(_LocalDescriptor):
         self.pooling = pooling
         self.convention = convention
         self.n_jobs = n_jobs
+
+    def _width(self):
+        return 3 * int(self.n_bins)
 
     def _kernel(self, p, normals, nb):
         n_bins = int(self.n_bins)

@@ -337,3 +337,18 @@ def test_simd_kernels_equal_the_scalar_pair_path():
             np.testing.assert_array_equal(got, ref)
             got_counts, _ = _spfh_counts(pts, normals, nb, n_bins, None)
             np.testing.assert_array_equal(got_counts, counts)
+
+
+@pytest.mark.parametrize(
+    ("est", "names"),
+    [
+        (PFHTransformer(n_bins=3, pooling="mean"), ["pfh0", "pfh26"]),
+        (FPFHTransformer(pooling="max"), ["fpfh0", "fpfh32"]),
+    ],
+)
+def test_feature_names_match_the_pooled_columns(est, names):
+    X = make_point_clouds(3, n_points=(30, 40), random_state=0)
+    out = est.fit_transform(X)
+    got = est.get_feature_names_out()
+    assert len(got) == out.shape[1]
+    assert [got[0], got[-1]] == names
