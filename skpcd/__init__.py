@@ -10,6 +10,7 @@ __version__ = "0.1.0.dev0"
 
 _PUBLIC = {
     "ShapeFeatures": "skpcd.features",
+    "TwoStepClassifier": "skpcd.classification",
     "check_point_clouds": "skpcd.utils",
     "make_default_pipeline": "skpcd.classification",
     "make_point_clouds": "skpcd.datasets",
