@@ -62,3 +62,19 @@ sphinx_gallery_conf = {
     "download_all_examples": False,
     "remove_config_comments": True,
 }
+
+
+def _skip_sklearn_members(app, what, name, obj, skip, options):
+    """Leave out members scikit-learn defines (``score``, ``set_fit_request``...).
+
+    Their docstrings point at targets that live in scikit-learn's own docs;
+    the API pages document what skpcd adds.
+    """
+    module = getattr(obj, "__module__", None) or ""
+    if what == "class" and module.split(".")[0] == "sklearn":
+        return True
+    return skip
+
+
+def setup(app):
+    app.connect("autodoc-skip-member", _skip_sklearn_members)

@@ -9,6 +9,11 @@ import importlib
 __version__ = "0.1.0.dev0"
 
 _PUBLIC = {
+    "BagOfFeatures": "skpcd.encoding",
+    "CaseBasedClassifier": "skpcd.classification",
+    "FPFHTransformer": "skpcd.features",
+    "ImprovedPFHTransformer": "skpcd.features",
+    "PFHTransformer": "skpcd.features",
     "ShapeFeatures": "skpcd.features",
     "TwoStepClassifier": "skpcd.classification",
     "check_point_clouds": "skpcd.utils",
@@ -23,6 +28,7 @@ _PUBLIC = {
 _SUBMODULES = (
     "classification",
     "datasets",
+    "encoding",
     "exceptions",
     "features",
     "io",

@@ -190,7 +190,7 @@ class TwoStepClassifier(ClassifierMixin, BaseEstimator):
         of its classes) have none: their class is decided by step one.
     n_features_in_ : int
         Number of features seen in :meth:`fit`.
-    feature_names_in_ : ndarray of shape (n_features_in_,)
+    feature_names_in_ : ndarray of shape (``n_features_in_``,)
         Names of the features seen in :meth:`fit`, when X has string column
         names.
 

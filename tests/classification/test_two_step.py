@@ -14,7 +14,6 @@ from sklearn.neighbors import KNeighborsClassifier
 from sklearn.pipeline import make_pipeline
 from sklearn.svm import SVC
 from sklearn.tree import DecisionTreeClassifier
-from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from skpcd.classification import TwoStepClassifier
 from skpcd.datasets import make_urban_objects
@@ -373,28 +372,6 @@ def test_pipeline_on_lists_of_clouds():
     assert set(pred) <= set(labels)
     proba = pipeline.predict_proba(clouds[30:])
     np.testing.assert_allclose(proba.sum(axis=1), 1)
-
-
-# Labels 1 and 2 grouped: the checks' targets then exercise both steps (y in
-# {0, 1, 2}), singleton groups only (binary y in {0, 1}, with a warning about
-# label 2) and a single group without step one (y in {1, 2}). All 63 checks
-# pass, as they do with groups=None.
-EXPECTED_FAILED_CHECKS = {}
-
-
-@parametrize_with_checks(
-    [
-        TwoStepClassifier(
-            LogisticRegression(),
-            DecisionTreeClassifier(random_state=0),
-            groups={"g": [1, 2]},
-        )
-    ],
-    expected_failed_checks=lambda estimator: EXPECTED_FAILED_CHECKS,
-)
-@pytest.mark.filterwarnings("ignore:labels .* of groups do not occur in y")
-def test_sklearn_compatible(estimator, check):
-    check(estimator)
 
 
 # ------------------------------------------------------------- real objects

@@ -1,0 +1,311 @@
+import pickle
+
+import numpy as np
+import pytest
+import sklearn
+from numpy.testing import assert_allclose, assert_array_equal
+from sklearn.base import clone
+from sklearn.calibration import CalibratedClassifierCV
+from sklearn.model_selection import GridSearchCV, StratifiedKFold
+
+from skpcd.classification import (
+    CaseBasedClassifier,
+    case_similarity,
+    make_case_based_pipeline,
+)
+from skpcd.features import ImprovedPFHTransformer, OverallDescriptor
+
+
+def _reference(a, b, w1=0.5, volume=True):
+    """One pair, from the paper's formulas and the documented conventions."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    s_r = 1.0
+    if volume:
+        (va, *a), (vb, *b) = a, b
+        a, b = np.asarray(a), np.asarray(b)
+        s_r = 1 - abs(va - vb) / max(va, vb) if max(va, vb) > 0 else 1.0
+    peaks = (a != 0) | (b != 0)
+    x, y = a[peaks], b[peaks]
+    if not a.any() or not b.any():
+        s_a = 0.0
+    elif np.ptp(x) == 0 or np.ptp(y) == 0:
+        s_a = float(np.ptp(x) == np.ptp(y) == 0)
+    else:
+        s_a = np.corrcoef(x, y)[0, 1]
+    return w1 * s_r + (1 - w1) * s_a if volume else s_a
+
+
+def _cases(n, n_bins=12, seed=0):
+    """Sparse histograms with a volume in column 0, and degenerate rows."""
+    rng = np.random.default_rng(seed)
+    H = rng.integers(0, 20, (n, n_bins)) * (rng.random((n, n_bins)) < 0.4)
+    H[0] = 0  # no peak
+    H[1] = 0
+    H[1, 3] = 7  # one peak
+    H[2] = 0
+    H[2, [3, 5]] = 4  # flat over two peaks
+    H[3] = H[2] * 3  # the same peaks, scaled
+    V = rng.uniform(0, 50, n)
+    V[:2] = 0
+    return np.column_stack([V, H]).astype(float)
+
+
+def test_similarity_tiny_oracle():
+    # S_r = 2 / 4; over the first four dimensions (the last is 0 in both)
+    # the deviations from the means (25, 25) are (-15, -25, 5, 35) and
+    # (-25, -5, 5, 25): S_a = 1400 / sqrt(2100 * 1300)
+    a = [2.0, 10, 0, 30, 60, 0]
+    b = [4.0, 0, 20, 30, 50, 0]
+    s_a = 1400 / np.sqrt(2100 * 1300)
+    got = case_similarity([a], [b], w1=0.25, volume_column=0)
+    assert_allclose(got, [[0.25 * 0.5 + 0.75 * s_a]], rtol=1e-12)
+    # the zero dimension is left out: the plain correlation differs
+    assert abs(np.corrcoef(a[1:], b[1:])[0, 1] - s_a) > 0.01
+    model = CaseBasedClassifier(w1=0.25, volume_column=0).fit([b], ["b"])
+    assert_allclose(model.class_similarity([a]), [[0.25 * 0.5 + 0.75 * s_a]])
+    # the same histograms without a volume column: S_a alone
+    assert_allclose(case_similarity([a[1:]], [b[1:]]), [[s_a]], rtol=1e-12)
+
+
+@pytest.mark.parametrize("volume", [True, False])
+def test_similarity_matches_reference(volume):
+    X = _cases(40)
+    if not volume:
+        X = X[:, 1:]
+    col = 0 if volume else None
+    got = case_similarity(X, X[:25], w1=0.3, volume_column=col)
+    want = [[_reference(a, b, 0.3, volume) for b in X[:25]] for a in X]
+    assert_allclose(got, want, atol=1e-12)
+    assert_allclose(got[:25], got[:25].T, atol=1e-12)
+
+
+def test_undefined_terms():
+    X = _cases(4)
+    sim = case_similarity(X, X, w1=0.5, volume_column=0)
+    assert sim[0, 0] == 0.5  # volumes 0 and 0: S_r = 1; no peak: S_a = 0
+    assert sim[0, 1] == 0.5
+    assert sim[0, 2] == 0  # volumes 0 and V > 0: S_r = 0
+    assert sim[1, 1] == 1.0  # one peak, itself
+    v2, v3 = X[2:4, 0]
+    # the same two peaks, each flat over them: S_a = 1
+    assert_allclose(sim[2, 3], 0.5 * min(v2, v3) / max(v2, v3) + 0.5)
+    H = np.array([[5.0, 0, 0], [0, 5, 0], [1, 2, 3], [2, 2, 2], [0, 0, 0]])
+    s = case_similarity(H, H)
+    assert s[0, 1] == -1  # (5, 0) and (0, 5) over two peaks
+    assert s[2, 3] == 0  # one flat over the peaks: undefined, 0
+    assert s[3, 3] == 1  # flat: equal up to scale to itself
+    assert_array_equal(s[4], 0)  # an all-zero histogram resembles nothing
+    assert_allclose(np.diag(s)[:4], 1)
+
+
+def test_flat_cases_with_same_peaks_are_alike():
+    X = _cases(4)
+    sim = case_similarity(X[2:4], X[2:4], w1=0.0, volume_column=0)
+    assert_allclose(sim, 1.0)
+
+
+def test_predict_follows_the_best_case_and_the_threshold():
+    X = _cases(60, seed=1)
+    y = np.repeat(["pole", "tree", "car"], 20)
+    model = CaseBasedClassifier(volume_column=0, w1=0.4, threshold=0.9).fit(X, y)
+    Q = _cases(30, seed=2)
+    S = case_similarity(Q, X, w1=0.4, volume_column=0)
+    best = S.max(axis=1)
+    want = np.where(best >= 0.9, y[S.argmax(axis=1)], "unknown")
+    assert 0 < (want == "unknown").sum() < len(Q)
+    assert_array_equal(model.predict(Q), want)
+    cs = model.class_similarity(Q)
+    for k, c in enumerate(model.classes_):
+        assert_allclose(cs[:, k], S[:, y == c].max(axis=1))
+    assert_array_equal(model.decision_function(Q), cs)
+    assert_array_equal(model.classes_, ["car", "pole", "tree"])
+
+
+def test_unknown_label_defaults_and_types():
+    X = _cases(20, seed=3)[:, 1:]
+    Q = -X[::-1]  # anti-correlated: all unknown at threshold 0.99
+    y = np.arange(20) % 2
+    model = CaseBasedClassifier(threshold=0.99).fit(X, y)
+    assert model.unknown_label_ == -1
+    pred = model.predict(Q)
+    assert pred.dtype.kind == "i" and (pred == -1).any()
+    assert_array_equal(model.classes_, [0, 1])
+    assert CaseBasedClassifier().fit(X, 2 * y - 1).unknown_label_ == -2
+    assert CaseBasedClassifier().fit(X, y + 3.0).unknown_label_ == -1
+    model = CaseBasedClassifier(threshold=0.99, unknown_label="?").fit(X, y)
+    assert set(model.predict(Q).tolist()) <= {"?", 0, 1}
+    assert "?" in model.predict(Q).tolist()
+    with pytest.raises(ValueError, match="is a training class"):
+        CaseBasedClassifier(unknown_label=1).fit(X, y)
+    # no threshold, no unknown: the label may then be a class
+    model = CaseBasedClassifier(threshold=None, unknown_label=1).fit(X, y)
+    assert set(model.predict(Q).tolist()) <= {0, 1}
+    assert model.predict(Q).dtype == model.classes_.dtype
+
+
+def test_binary_decision_function_and_ties():
+    X = np.array([[1.0, 2, 3], [1, 2, 3], [3, 2, 1]])
+    model = CaseBasedClassifier(threshold=None).fit(X, ["b", "a", "c"])
+    # cases 0 and 1 tie: the first class of classes_ ("a") wins
+    assert model.predict([[2.0, 4, 6]]).tolist() == ["a"]
+    sim, ind = model.retrieve([[2.0, 4, 6]], n_cases=3)
+    assert ind.tolist() == [[0, 1, 2]]  # ties in training order
+    assert_allclose(sim, [[1, 1, -1]])
+    binary = CaseBasedClassifier().fit(X[1:], ["a", "c"])
+    Q = np.array([[1.0, 2, 4], [4, 2, 1]])
+    cs = binary.class_similarity(Q)
+    assert_allclose(binary.decision_function(Q), cs[:, 1] - cs[:, 0])
+    assert binary.predict(Q).tolist() == ["a", "c"]
+
+
+def test_retrieve_equals_sorted_similarities():
+    X = _cases(50, seed=4)
+    model = CaseBasedClassifier(volume_column=0).fit(X, np.arange(50) % 3)
+    Q = _cases(7, seed=5)
+    sim, ind = model.retrieve(Q, n_cases=6)
+    S = case_similarity(Q, X, volume_column=0)
+    assert_array_equal(ind, np.argsort(-S, axis=1, kind="stable")[:, :6])
+    assert_allclose(sim, np.take_along_axis(S, ind, axis=1))
+    for bad in (0, 51, 2.0):
+        with pytest.raises(ValueError, match="n_cases"):
+            model.retrieve(Q, n_cases=bad)
+
+
+def test_small_working_memory_gives_the_same_result():
+    X = _cases(300, seed=6)
+    model = CaseBasedClassifier(volume_column=0).fit(X, np.arange(300) % 4)
+    Q = _cases(90, seed=7)
+    want = model.class_similarity(Q), model.retrieve(Q, 4)
+    with sklearn.config_context(working_memory=0.05):  # blocks of ~2 rows
+        assert len(model._blocks(len(Q), 80 * 300)) > 10
+        got = model.class_similarity(Q), model.retrieve(Q, 4)
+    assert_array_equal(got[0], want[0])
+    assert_array_equal(got[1][1], want[1][1])
+
+
+def test_volume_column_rules():
+    X = _cases(10, seed=8)
+    y = np.arange(10) % 2
+    last = np.roll(X, -1, axis=1)  # the volume in the last column
+    a = CaseBasedClassifier(volume_column=0).fit(X, y).class_similarity(X)
+    b = CaseBasedClassifier(volume_column=-1).fit(last, y).class_similarity(last)
+    assert_allclose(a, b)
+    neg = X.copy()
+    neg[3, 0] = -1
+    with pytest.raises(ValueError, match="must not be negative"):
+        CaseBasedClassifier(volume_column=0).fit(neg, y)
+    model = CaseBasedClassifier(volume_column=0).fit(X, y)
+    with pytest.raises(ValueError, match="must not be negative"):
+        model.predict(neg)
+    with pytest.raises(ValueError, match="out of range"):
+        CaseBasedClassifier(volume_column=13).fit(X, y)
+    with pytest.raises(ValueError, match="feature"):
+        CaseBasedClassifier(volume_column=0).fit(X[:, :1], y)
+    nan = X.copy()
+    nan[2, 4] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        CaseBasedClassifier().fit(nan, y)
+    with pytest.raises(ValueError, match="NaN"):
+        model.predict(nan)
+    # float32 input gives the float64 answer
+    f32 = X.astype(np.float32)
+    assert_allclose(model.class_similarity(f32), model.class_similarity(X))
+
+
+def test_calibrated_probabilities():
+    X = _cases(60, seed=9)[:, 1:]
+    y = (X[:, :6].sum(axis=1) > X[:, 6:].sum(axis=1)).astype(int)
+    model = CalibratedClassifierCV(CaseBasedClassifier(threshold=None), cv=3)
+    proba = model.fit(X, y).predict_proba(X)
+    assert proba.shape == (60, 2)
+    assert_allclose(proba.sum(axis=1), 1)
+
+
+def _subsample(clouds, n_points=300, seed=0):
+    rng = np.random.default_rng(seed)
+    return [
+        c if len(c) <= n_points else c[rng.choice(len(c), n_points, replace=False)]
+        for c in clouds
+    ]
+
+
+@pytest.fixture(scope="module")
+def dales_cases(dales):
+    """Volume and improved PFH of 40 DALES objects per class (at most 300
+    points each, to keep the test fast)."""
+    clouds, labels, _ = dales
+    keep = np.concatenate([np.flatnonzero(labels == c)[:40] for c in np.unique(labels)])
+    clouds = _subsample([clouds[i] for i in keep])
+    X = make_case_based_pipeline()[0].fit_transform(clouds)
+    return X, labels[keep], clouds
+
+
+def test_pipeline_layout(dales_cases):
+    X, _, clouds = dales_cases
+    assert_allclose(X[:, 0], OverallDescriptor().fit_transform(clouds)[:, 9])
+    H = ImprovedPFHTransformer(undefined="zero").fit_transform(clouds)
+    assert_allclose(X[:, 1:], H)
+    plain = make_case_based_pipeline(volume=False, threshold=None)
+    assert plain[-1].volume_column is None
+    with pytest.raises(TypeError, match="volume_column"):
+        make_case_based_pipeline(volume_column=1)
+
+
+def test_approximate_recall_on_dales(dales_cases):
+    X, labels, _ = dales_cases
+    train = np.arange(len(X)) % 4 != 0
+    params = {"volume_column": 0, "w1": 0.3, "threshold": None}
+    exact = CaseBasedClassifier(**params).fit(X[train], labels[train])
+    approx = CaseBasedClassifier(
+        **params, algorithm="approximate", n_candidates=5, random_state=0
+    ).fit(X[train], labels[train])
+    assert approx.algorithm_ == "approximate"
+    assert all(index is not None for *_, index in approx._indexes)
+    Q = X[~train]
+    s_exact, i_exact = exact.retrieve(Q, n_cases=5)
+    s_approx, i_approx = approx.retrieve(Q, n_cases=5)
+    top1 = (i_exact[:, 0] == i_approx[:, 0]).mean()
+    top5 = np.mean([len(set(a) & set(b)) / 5 for a, b in zip(i_exact, i_approx)])
+    assert top1 >= 0.95
+    assert top5 >= 0.9
+    # candidates are cases: never more similar than the exact best
+    assert (s_approx <= s_exact + 1e-12).all()
+    cs_exact, cs_approx = exact.class_similarity(Q), approx.class_similarity(Q)
+    assert (cs_approx <= cs_exact + 1e-12).all()
+    assert (approx.predict(Q) == exact.predict(Q)).mean() >= 0.95
+    # pickle and clone round trips
+    again = pickle.loads(pickle.dumps(approx))
+    assert_array_equal(again.retrieve(Q, n_cases=5)[1], i_approx)
+    refit = clone(approx).fit(X[train], labels[train])
+    assert_array_equal(refit.retrieve(Q, n_cases=5)[1], i_approx)
+
+
+def test_auto_switch(dales_cases, monkeypatch):
+    from skpcd.classification import _case_based
+
+    X, labels, _ = dales_cases
+    assert CaseBasedClassifier().fit(X, labels).algorithm_ == "exact"
+    monkeypatch.setattr(_case_based, "AUTO_APPROXIMATE", 100)
+    model = CaseBasedClassifier(n_candidates=5).fit(X, labels)
+    assert model.algorithm_ == "approximate"
+
+
+def test_grid_search_on_dales_clouds(dales_cases):
+    _, labels, clouds = dales_cases
+    pick = np.arange(len(clouds)) % 3 == 0
+    clouds = [c for c, k in zip(clouds, pick) if k]
+    labels = labels[pick]
+    grid = GridSearchCV(
+        make_case_based_pipeline(),
+        {
+            "casebasedclassifier__w1": [0.0, 0.5],
+            "casebasedclassifier__threshold": [None, 0.95],
+        },
+        cv=StratifiedKFold(3, shuffle=True, random_state=0),
+    )
+    grid.fit(clouds, labels)
+    scores = grid.cv_results_["mean_test_score"]
+    assert grid.best_params_["casebasedclassifier__threshold"] is None
+    assert scores.max() > 0.5  # five classes: chance is 0.2
+    model = pickle.loads(pickle.dumps(grid.best_estimator_))
+    assert_array_equal(model.predict(clouds), grid.predict(clouds))
