@@ -9,9 +9,12 @@ import importlib
 __version__ = "0.1.0.dev0"
 
 _PUBLIC = {
+    "AutoEpsDBSCAN": "skpcd.segmentation",
     "BagOfFeatures": "skpcd.encoding",
     "CaseBasedClassifier": "skpcd.classification",
+    "EuclideanClusters": "skpcd.segmentation",
     "FPFHTransformer": "skpcd.features",
+    "GroundFilter": "skpcd.segmentation",
     "ImprovedPFHTransformer": "skpcd.features",
     "PFHTransformer": "skpcd.features",
     "ShapeFeatures": "skpcd.features",
@@ -23,6 +26,7 @@ _PUBLIC = {
     "point_spacing": "skpcd.preprocessing",
     "read_point_cloud": "skpcd.io",
     "read_segments": "skpcd.io",
+    "segment_scene": "skpcd.segmentation",
     "write_point_cloud": "skpcd.io",
 }
 _SUBMODULES = (
@@ -33,6 +37,7 @@ _SUBMODULES = (
     "features",
     "io",
     "preprocessing",
+    "segmentation",
     "utils",
 )
 

@@ -1,0 +1,158 @@
+"""numba kernels for density clustering on the sorted voxel grid.
+
+The grid is the radius-search grid of :mod:`skpcd.preprocessing._neighbors`:
+cells at least ``eps`` wide, points sorted by cell key, so that the points
+within ``eps`` of a point lie in the 27 cells around its cell, found as 9
+runs of memory by :func:`skpcd.preprocessing._grid_kernels._block`.
+
+Nothing here stores a neighbourhood. The kernels work on *sorted positions*
+``t`` (the point ``order[t]``): a union-find forest ``parent`` over
+positions links the core points closer than ``eps``, each pair tested once
+(from its lower position), and every non-core point is attached to its
+nearest core point within ``eps``. Memory is O(n_points).
+"""
+
+import numpy as np
+from numba import njit
+
+from skpcd.preprocessing._grid_kernels import _block
+from skpcd.utils._numba import borrow, keep
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _find(parent, t):
+    """Root of ``t`` with path halving; inlined (it takes an array)."""
+    while parent[t] != t:
+        parent[t] = parent[parent[t]]
+        t = parent[t]
+    return t
+
+
+@njit(cache=True, nogil=True)
+def union_core(
+    lo, hi, xs, core, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2, parent
+):  # fmt: skip
+    """Link the core points of cells ``lo`` to ``hi`` to the core points
+    within ``sqrt(r2)`` (inclusive) in ``parent``, the lower root kept.
+
+    ``xs`` holds the points in sorted order and ``core`` their core flags
+    (sorted order too). A pair is tested from its lower position only.
+    Serial: the forest is shared.
+    """
+    xs = borrow(xs)
+    core = borrow(core)
+    cell_cloud = borrow(cell_cloud)
+    cell_key = borrow(cell_key)
+    cell_start = borrow(cell_start)
+    cloud_cells = borrow(cloud_cells)
+    dims = borrow(dims)
+    parent = borrow(parent)
+    i_own = np.empty(27, dtype=np.int64)
+    cur = borrow(i_own[:9])
+    starts = borrow(i_own[9:18])
+    stops = borrow(i_own[18:])
+    for cell in range(lo, hi):
+        n_runs = _block(
+            cell, cell - 1 if cell > lo else -1, cell_cloud, cell_key, cell_start,
+            cloud_cells, dims, cur, starts, stops,
+        )  # fmt: skip
+        for t0 in range(cell_start[cell], cell_start[cell + 1]):
+            if not core[t0]:
+                continue
+            qx, qy, qz = xs[t0, 0], xs[t0, 1], xs[t0, 2]
+            for r in range(n_runs):
+                for t in range(max(starts[r], t0 + 1), stops[r]):
+                    if not core[t]:
+                        continue
+                    ex = xs[t, 0] - qx
+                    ey = xs[t, 1] - qy
+                    ez = xs[t, 2] - qz
+                    if ex * ex + ey * ey + ez * ez <= r2:
+                        a = _find(parent, t0)
+                        b = _find(parent, t)
+                        if a < b:
+                            parent[b] = a
+                        elif b < a:
+                            parent[a] = b
+    keep(i_own)
+
+
+@njit(cache=True, nogil=True)
+def attach_border(
+    lo, hi, xs, order, core, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2,
+    nearest,
+):  # fmt: skip
+    """For every non-core point of cells ``lo`` to ``hi``, the position of
+    its nearest core point within ``sqrt(r2)`` into ``nearest`` (ties by the
+    lower point index), or -1. Rows are independent: safe in threads."""
+    xs = borrow(xs)
+    order = borrow(order)
+    core = borrow(core)
+    cell_cloud = borrow(cell_cloud)
+    cell_key = borrow(cell_key)
+    cell_start = borrow(cell_start)
+    cloud_cells = borrow(cloud_cells)
+    dims = borrow(dims)
+    nearest = borrow(nearest)
+    i_own = np.empty(27, dtype=np.int64)
+    cur = borrow(i_own[:9])
+    starts = borrow(i_own[9:18])
+    stops = borrow(i_own[18:])
+    for cell in range(lo, hi):
+        n_runs = _block(
+            cell, cell - 1 if cell > lo else -1, cell_cloud, cell_key, cell_start,
+            cloud_cells, dims, cur, starts, stops,
+        )  # fmt: skip
+        for t0 in range(cell_start[cell], cell_start[cell + 1]):
+            if core[t0]:
+                continue
+            qx, qy, qz = xs[t0, 0], xs[t0, 1], xs[t0, 2]
+            best, best_d2, best_i = -1, r2, -1
+            for r in range(n_runs):
+                for t in range(starts[r], stops[r]):
+                    if not core[t]:
+                        continue
+                    ex = xs[t, 0] - qx
+                    ey = xs[t, 1] - qy
+                    ez = xs[t, 2] - qz
+                    d2 = ex * ex + ey * ey + ez * ez
+                    if d2 < best_d2 or (
+                        d2 == best_d2 and (best < 0 or order[t] < best_i)
+                    ):
+                        best, best_d2, best_i = t, d2, order[t]
+            nearest[t0] = best
+    keep(i_own)
+
+
+@njit(cache=True, nogil=True)
+def component_labels(parent, core, nearest, order, labels):
+    """Cluster labels by point index into ``labels``: clusters are numbered
+    in the order of their lowest point index; points in no cluster get -1.
+
+    ``parent`` is the forest over sorted positions (flattened here),
+    ``nearest`` the core position each non-core point is attached to.
+    """
+    n = len(parent)
+    root = np.empty(n, dtype=np.int64)
+    for t in range(n):
+        if core[t]:
+            root[t] = _find(parent, t)
+        elif nearest[t] >= 0:
+            root[t] = _find(parent, nearest[t])
+        else:
+            root[t] = -1
+    number = np.full(n, -1, dtype=np.int64)
+    position = np.empty(n, dtype=np.int64)
+    for t in range(n):
+        position[order[t]] = t
+    m = 0
+    for i in range(n):
+        r = root[position[i]]
+        if r < 0:
+            labels[i] = -1
+            continue
+        if number[r] < 0:
+            number[r] = m
+            m += 1
+        labels[i] = number[r]
+    return m

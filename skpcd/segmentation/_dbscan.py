@@ -1,0 +1,353 @@
+"""DBSCAN with eps estimated from the data (Wang et al., Sensors 2019).
+
+For k = 1 .. ``n_neighbors``, the distance from a point to its k-th nearest
+neighbour (the largest of its k nearest-neighbour distances) is averaged
+over the points; a polynomial fitted to this curve of k is smooth, and its
+knee (where it departs most from its chord) gives the radius: below it the
+k nearest neighbours are on the point's own surface, beyond it they reach
+farther. The clustering itself is the grid DBSCAN of
+:mod:`skpcd.segmentation._clusters`, in O(n_points) memory.
+"""
+
+import typing
+from numbers import Integral, Real
+
+import numpy as np
+from scipy.spatial import cKDTree
+from sklearn.base import BaseEstimator, ClusterMixin, _fit_context
+from sklearn.utils import check_random_state
+from sklearn.utils._param_validation import Interval
+from sklearn.utils.validation import check_is_fitted
+
+from skpcd.segmentation._clusters import check_scene, grid_dbscan
+from skpcd.utils._parallel import effective_threads
+
+__all__ = ["AutoEpsDBSCAN", "estimate_eps", "plot_eps_curve"]
+
+# Points of the fitted curve searched for the knee.
+_KNEE_GRID = 1000
+
+
+def _kdist_curve(xyz, n_neighbors, max_samples, random_state, n_jobs):
+    """Mean k-th nearest-neighbour distance for k = 1..K over (a sample of)
+    the points; neighbours among all points. Returns ``(k, mean)``."""
+    n = len(xyz)
+    k_max = min(int(n_neighbors), n - 1)
+    if max_samples is not None and n > max_samples:
+        rng = check_random_state(random_state)
+        queries = xyz[np.sort(rng.choice(n, int(max_samples), replace=False))]
+    else:
+        queries = xyz
+    tree = cKDTree(xyz, balanced_tree=False, compact_nodes=False)
+    dist, _ = tree.query(queries, k=k_max + 1, workers=effective_threads(n_jobs))
+    # column 0 is the point itself (or a duplicate of it: distance 0 either way)
+    return np.arange(1, k_max + 1), dist[:, 1:].mean(axis=0)
+
+
+def _fit_knee(k, mean, degree):
+    """Polynomial fitted to the curve, and the k where it is farthest from
+    its chord (both axes scaled to [0, 1]): ``(poly, knee_k, eps)``."""
+    poly = np.polynomial.Polynomial.fit(k, mean, deg=min(degree, len(k) - 1))
+    grid = np.linspace(k[0], k[-1], _KNEE_GRID)
+    y = poly(grid)
+    span = y.max() - y.min()
+    if not span > 0:
+        knee = grid[0]
+    else:
+        x = (grid - grid[0]) / (grid[-1] - grid[0])
+        chord = (y[-1] - y[0]) / span * x
+        knee = grid[np.argmax(np.abs((y - y[0]) / span - chord))]
+    return poly, float(knee), float(poly(knee))
+
+
+def estimate_eps(
+    points,
+    *,
+    n_neighbors=30,
+    degree=3,
+    max_samples=100_000,
+    random_state=None,
+    n_jobs=None,
+):
+    """The DBSCAN radius of a cloud from its k-nearest-neighbour distance curve.
+
+    The estimate of :class:`AutoEpsDBSCAN`; read more there.
+
+    Parameters
+    ----------
+    points : array-like of shape (n_points, 3+)
+        One cloud; columns beyond the third are ignored.
+    n_neighbors : int, default=30
+        Largest k of the curve.
+    degree : int, default=3
+        Degree of the polynomial fitted to the curve.
+    max_samples : int or None, default=100_000
+        The curve is averaged over this many random points (neighbours are
+        still searched among all points); None uses every point.
+    random_state : int, RandomState instance or None, default=None
+        Draws the sample.
+    n_jobs : int, default=None
+        Threads for the neighbour queries; None means 1, -1 all cores.
+
+    Returns
+    -------
+    eps : float
+        The estimated radius.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from skpcd.segmentation import estimate_eps
+    >>> g = np.stack(np.meshgrid(np.arange(40.0), np.arange(40.0), [0.0]), -1)
+    >>> eps = estimate_eps(0.1 * g.reshape(-1, 3))
+    >>> 0.1 < eps < 0.4
+    True
+    """
+    est = AutoEpsDBSCAN(
+        n_neighbors=n_neighbors,
+        degree=degree,
+        max_samples=max_samples,
+        random_state=random_state,
+        n_jobs=n_jobs,
+    )
+    xyz = check_scene(points, min_points=2)
+    return est._estimate(xyz)
+
+
+class AutoEpsDBSCAN(ClusterMixin, BaseEstimator):
+    """DBSCAN whose radius is estimated from the data (Wang et al., 2019).
+
+    The radius ``eps`` comes from the curve of the mean distance of the
+    points to their k-th nearest neighbour against k (the average of the k
+    nearest neighbours' maximum distances), k = 1 .. ``n_neighbors``: a
+    polynomial of degree ``degree`` is fitted to it and ``eps`` is the
+    fitted value at its knee, where the curve departs most from its chord
+    (Satopää et al.): the scale at which neighbourhoods stop growing along
+    the sampled surfaces. DBSCAN then runs with that ``eps`` and
+    ``min_samples``.
+
+    The clustering runs on a voxel grid with cells ``eps`` wide: core points
+    are counted, joined by union-find, and every other point joins its
+    nearest core point within ``eps``. Memory is O(n_points) plus
+    O(max_samples * n_neighbors) for the curve: no neighbourhood is stored,
+    unlike :class:`sklearn.cluster.DBSCAN` and Open3D's ``cluster_dbscan``,
+    which hold all of them and run out of memory on large clouds.
+
+    Read more in the :ref:`User Guide <segmentation>`.
+
+    Parameters
+    ----------
+    eps : float or None, default=None
+        None estimates the radius (the method); a number skips the estimate
+        (plain DBSCAN).
+    min_samples : int, default=5
+        Points within ``eps`` of a point, itself included, that make it a
+        core point (Open3D's ``min_points``; the paper's MinPts).
+    n_neighbors : int, default=30
+        Largest k of the distance curve.
+    degree : int, default=3
+        Degree of the polynomial fitted to the curve.
+    max_samples : int or None, default=100_000
+        The curve is averaged over this many random points, their
+        neighbours searched among all points; None uses every point.
+    random_state : int, RandomState instance or None, default=None
+        Draws that sample (clouds with at most ``max_samples`` points use
+        them all and need no seed).
+    n_jobs : int, default=None
+        Threads; None means 1, -1 all cores.
+
+    Attributes
+    ----------
+    eps_ : float
+        The radius used.
+    curve_k_ : ndarray of shape (n_k,)
+        k = 1 .. ``n_neighbors`` (fewer for tiny clouds); empty when ``eps``
+        was given.
+    curve_distances_ : ndarray of shape (n_k,)
+        Mean distance to the k-th nearest neighbour.
+    curve_ : numpy.polynomial.Polynomial or None
+        The fitted curve (call it with k).
+    knee_ : float or None
+        The k of the knee; ``eps_ = curve_(knee_)``.
+    labels_ : ndarray of shape (n_points,), dtype int64
+        Cluster of each point, numbered in the order of their lowest point
+        index; -1 for noise.
+    core_sample_indices_ : ndarray of shape (n_core,)
+        Indices of the core points.
+    n_clusters_ : int
+        Number of clusters.
+    n_features_in_ : int
+        Number of columns of X seen in :meth:`fit`.
+
+    See Also
+    --------
+    EuclideanClusters : Connected components within a fixed distance.
+    segment_scene : Ground removal and clustering of a whole scene.
+    plot_eps_curve : Draw the curve, its fit and the knee.
+
+    Notes
+    -----
+    Core points and their clusters are those of
+    :class:`sklearn.cluster.DBSCAN` with the same ``eps`` and
+    ``min_samples``. A border point within ``eps`` of two clusters joins
+    the one of its nearest core point (scikit-learn: the one expanded
+    first), so the partition does not depend on the order of the points.
+
+    The paper fits the curve and reads the radius at its turning point; the
+    knee criterion here is the maximum distance to the chord of the fitted
+    curve. Columns of X beyond the third are ignored.
+
+    References
+    ----------
+    .. [1] C. Wang, M. Ji, J. Wang, W. Wen, T. Li, Y. Sun, "An improved DBSCAN
+       method for LiDAR data segmentation with automatic Eps estimation",
+       Sensors 19(1), 172, 2019.
+    .. [2] V. Satopää, J. Albrecht, D. Irwin, B. Raghavan, "Finding a
+       'kneedle' in a haystack", ICDCS Workshops, 2011.
+    .. [3] M. Ester, H.-P. Kriegel, J. Sander, X. Xu, "A density-based
+       algorithm for discovering clusters in large spatial databases with
+       noise", KDD, 1996.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from skpcd.segmentation import AutoEpsDBSCAN
+    >>> rng = np.random.default_rng(0)
+    >>> plane = np.column_stack([rng.random((2000, 2)) * 4, np.zeros(2000)])
+    >>> scene = np.vstack([plane, plane + [6, 0, 0], [[3, 9, 9]]])
+    >>> db = AutoEpsDBSCAN(random_state=0).fit(scene)
+    >>> db.n_clusters_, db.labels_[-1]
+    (2, np.int64(-1))
+    >>> 0.05 < db.eps_ < 0.5
+    True
+    """
+
+    _parameter_constraints: typing.ClassVar[dict] = {
+        "eps": [Interval(Real, 0, None, closed="neither"), None],
+        "min_samples": [Interval(Integral, 1, None, closed="left")],
+        "n_neighbors": [Interval(Integral, 2, None, closed="left")],
+        "degree": [Interval(Integral, 1, None, closed="left")],
+        "max_samples": [Interval(Integral, 1, None, closed="left"), None],
+        "random_state": ["random_state"],
+        "n_jobs": [Integral, None],
+    }
+
+    def __init__(
+        self,
+        *,
+        eps=None,
+        min_samples=5,
+        n_neighbors=30,
+        degree=3,
+        max_samples=100_000,
+        random_state=None,
+        n_jobs=None,
+    ):
+        self.eps = eps
+        self.min_samples = min_samples
+        self.n_neighbors = n_neighbors
+        self.degree = degree
+        self.max_samples = max_samples
+        self.random_state = random_state
+        self.n_jobs = n_jobs
+
+    def _estimate(self, xyz):
+        """Set the curve attributes; return the estimated eps."""
+        k, mean = _kdist_curve(
+            xyz, self.n_neighbors, self.max_samples, self.random_state, self.n_jobs
+        )
+        poly, knee, eps = _fit_knee(k, mean, self.degree)
+        if not eps > 0:
+            raise ValueError(
+                "cannot estimate eps: the points' nearest-neighbour distances are "
+                "all zero (duplicated points); give eps"
+            )
+        self.curve_k_, self.curve_distances_ = k, mean
+        self.curve_, self.knee_ = poly, knee
+        return eps
+
+    @_fit_context(prefer_skip_nested_validation=True)
+    def fit(self, X, y=None):
+        """Estimate eps (unless given) and cluster one cloud.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_points, 3+)
+            The points; columns beyond the third are ignored.
+        y : None
+            Ignored.
+
+        Returns
+        -------
+        self : object
+            The fitted estimator.
+        """
+        xyz = check_scene(X, self, min_points=1 if self.eps is not None else 2)
+        if self.eps is None:
+            self.eps_ = self._estimate(xyz)
+        else:
+            self.eps_ = float(self.eps)
+            self.curve_k_ = np.zeros(0, dtype=np.int64)
+            self.curve_distances_ = np.zeros(0)
+            self.curve_, self.knee_ = None, None
+        self.labels_, core = grid_dbscan(
+            xyz, self.eps_, self.min_samples, n_jobs=self.n_jobs
+        )
+        self.core_sample_indices_ = np.flatnonzero(core)
+        self.n_clusters_ = int(self.labels_.max() + 1) if len(xyz) else 0
+        return self
+
+
+def plot_eps_curve(estimator, ax=None):
+    """Draw the distance curve of a fitted :class:`AutoEpsDBSCAN`, its fit and knee.
+
+    Needs matplotlib.
+
+    Parameters
+    ----------
+    estimator : AutoEpsDBSCAN
+        Fitted with ``eps=None``.
+    ax : matplotlib Axes, default=None
+        Where to draw; a new figure when None.
+
+    Returns
+    -------
+    ax : matplotlib Axes
+        The axes drawn on.
+
+    Examples
+    --------
+    >>> import matplotlib
+    >>> matplotlib.use("Agg")
+    >>> import numpy as np
+    >>> from skpcd.segmentation import AutoEpsDBSCAN, plot_eps_curve
+    >>> rng = np.random.default_rng(0)
+    >>> db = AutoEpsDBSCAN().fit(rng.random((500, 3)))
+    >>> ax = plot_eps_curve(db)
+    >>> ax.get_xlabel()
+    'k (nearest neighbours)'
+    """
+    check_is_fitted(estimator, "eps_")
+    if estimator.curve_ is None:
+        raise ValueError("the estimator was given eps: there is no curve to plot")
+    try:
+        import matplotlib.pyplot as plt
+    except ImportError as exc:  # pragma: no cover
+        raise ImportError("plot_eps_curve needs matplotlib") from exc
+    if ax is None:
+        _, ax = plt.subplots(figsize=(5, 3.5))
+    k = estimator.curve_k_
+    grid = np.linspace(k[0], k[-1], 200)
+    ax.plot(k, estimator.curve_distances_, "o", ms=3, label="mean k-th NN distance")
+    ax.plot(grid, estimator.curve_(grid), "-", label="fitted curve")
+    ax.plot(
+        [estimator.knee_],
+        [estimator.eps_],
+        "s",
+        color="C3",
+        label=f"knee: k={estimator.knee_:.1f}, eps={estimator.eps_:.3f}",
+    )
+    ax.set_xlabel("k (nearest neighbours)")
+    ax.set_ylabel("distance")
+    ax.legend(loc="lower right", fontsize="small")
+    return ax

@@ -1,0 +1,235 @@
+"""Grid DBSCAN and Euclidean clusters: exact oracle, invariances, bad input,
+memory, scikit-learn conventions."""
+
+import tracemalloc
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial.distance import cdist
+from sklearn.base import clone
+from sklearn.cluster import DBSCAN
+from sklearn.utils.estimator_checks import parametrize_with_checks
+
+from skpcd.segmentation import (
+    AutoEpsDBSCAN,
+    EuclideanClusters,
+    GroundFilter,
+    euclidean_clusters,
+)
+from skpcd.segmentation._clusters import filter_cluster_sizes, grid_dbscan
+
+
+def reference_dbscan(xyz, eps, min_samples):
+    """Slow, obvious DBSCAN: all distances, components of the core graph,
+    border points to their nearest core point (ties: lower index), clusters
+    numbered by their lowest point index."""
+    d = cdist(xyz, xyz)
+    near = d <= eps
+    core = near.sum(axis=1) >= min_samples
+    cc = np.flatnonzero(core)
+    _, comp = connected_components(csr_matrix(near[np.ix_(cc, cc)]), directed=False)
+    root = np.full(len(xyz), -1)
+    root[cc] = comp
+    for i in np.flatnonzero(~core):
+        cand = cc[near[i, cc]]
+        if len(cand):
+            root[i] = root[cand[np.lexsort((cand, d[i, cand]))[0]]]
+    labels = np.full(len(xyz), -1)
+    seen = {}
+    for i, r in enumerate(root):
+        if r >= 0:
+            labels[i] = seen.setdefault(r, len(seen))
+    return labels, core
+
+
+def canonical(labels):
+    """Labels renumbered by first appearance (-1 kept)."""
+    out = np.full(len(labels), -1)
+    seen = {}
+    for i, v in enumerate(labels):
+        if v >= 0:
+            out[i] = seen.setdefault(v, len(seen))
+    return out
+
+
+def _blobs(n, seed, spread=1.0):
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(0, 10, (5, 3))
+    pts = centres[rng.integers(0, 5, n)] + rng.normal(0, 0.3 * spread, (n, 3))
+    return np.vstack([pts, rng.uniform(-2, 12, (n // 10, 3))])
+
+
+@pytest.mark.parametrize("eps", [0.2, 0.5, 1.5])
+@pytest.mark.parametrize("min_samples", [1, 3, 8])
+def test_grid_dbscan_equals_reference(eps, min_samples):
+    xyz = _blobs(400, seed=int(eps * 10) + min_samples)
+    labels, core = grid_dbscan(xyz, eps, min_samples)
+    ref_labels, ref_core = reference_dbscan(xyz, eps, min_samples)
+    np.testing.assert_array_equal(core, ref_core)
+    np.testing.assert_array_equal(labels, ref_labels)
+
+
+def test_core_partition_equals_sklearn():
+    xyz = _blobs(1500, seed=3)
+    labels, core = grid_dbscan(xyz, 0.4, 6)
+    sk = DBSCAN(eps=0.4, min_samples=6).fit(xyz)
+    sk_core = np.zeros(len(xyz), bool)
+    sk_core[sk.core_sample_indices_] = True
+    np.testing.assert_array_equal(core, sk_core)
+    np.testing.assert_array_equal(canonical(labels[core]), canonical(sk.labels_[core]))
+    np.testing.assert_array_equal(labels < 0, sk.labels_ < 0)
+
+
+def test_euclidean_clusters_are_connected_components():
+    xyz = _blobs(600, seed=4)
+    eps = 0.35
+    _, comp = connected_components(csr_matrix(cdist(xyz, xyz) <= eps), directed=False)
+    sizes = np.bincount(comp)
+    kept = (sizes[comp] >= 20) & (sizes[comp] <= 100)
+    labels = euclidean_clusters(xyz, eps=eps, min_cluster_size=20, max_cluster_size=100)
+    np.testing.assert_array_equal(labels >= 0, kept)
+    np.testing.assert_array_equal(canonical(labels[kept]), canonical(comp[kept]))
+    assert labels.max() + 1 == len(np.unique(comp[kept]))
+
+
+def test_euclidean_clusters_seed_defaults():
+    ec = EuclideanClusters()
+    assert (ec.eps, ec.min_cluster_size, ec.max_cluster_size) == (0.2, 500, None)
+
+
+def test_filter_cluster_sizes():
+    labels = np.array([0, 0, 1, -1, 2, 2, 2, 1, 0])
+    np.testing.assert_array_equal(
+        filter_cluster_sizes(labels, 3), [0, 0, -1, -1, 1, 1, 1, -1, 0]
+    )
+    np.testing.assert_array_equal(
+        filter_cluster_sizes(labels, 2, 2), [-1, -1, 0, -1, -1, -1, -1, 0, -1]
+    )
+    assert filter_cluster_sizes(np.full(3, -1), 1).tolist() == [-1, -1, -1]
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    shift=st.tuples(*[st.floats(-1e4, 1e4, allow_nan=False)] * 3),
+)
+def test_partition_invariant_to_translation_and_order(seed, shift):
+    rng = np.random.default_rng(seed)
+    # coordinates on a 1/64 lattice: translated by a lattice multiple they
+    # stay exact, so distances (and ties) are unchanged
+    xyz = np.round(_blobs(300, seed) * 64) / 64
+    shift = np.round(np.asarray(shift) * 64) / 64
+    labels, core = grid_dbscan(xyz, 0.5, 4)
+    moved, moved_core = grid_dbscan(np.ascontiguousarray(xyz + shift), 0.5, 4)
+    np.testing.assert_array_equal(moved, labels)
+    np.testing.assert_array_equal(moved_core, core)
+    perm = rng.permutation(len(xyz))
+    shuffled, shuffled_core = grid_dbscan(np.ascontiguousarray(xyz[perm]), 0.5, 4)
+    np.testing.assert_array_equal(shuffled_core, core[perm])
+    # core points: same clusters; border points: same unless tied
+    np.testing.assert_array_equal(
+        canonical(shuffled[shuffled_core]), canonical(labels[perm][core[perm]])
+    )
+    ec = EuclideanClusters(eps=0.5, min_cluster_size=1)
+    np.testing.assert_array_equal(
+        canonical(ec.fit(xyz[perm]).labels_), canonical(ec.fit(xyz).labels_[perm])
+    )
+
+
+def test_n_jobs_and_read_only_input():
+    xyz = _blobs(20_000, seed=5)
+    one = AutoEpsDBSCAN(eps=0.3, n_jobs=1).fit(xyz).labels_
+    frozen = xyz.copy()
+    frozen.flags.writeable = False
+    two = AutoEpsDBSCAN(eps=0.3, n_jobs=2).fit(frozen).labels_
+    np.testing.assert_array_equal(one, two)
+
+
+def test_fewer_columns_are_padded_and_extra_columns_ignored():
+    rng = np.random.default_rng(0)
+    xy = rng.random((300, 2)) * 5
+    padded = np.column_stack([xy, np.zeros(300)])
+    ec = EuclideanClusters(eps=0.3, min_cluster_size=1)
+    np.testing.assert_array_equal(ec.fit(xy).labels_, ec.fit(padded).labels_)
+    with_intensity = np.column_stack([padded, rng.random(300) * 100])
+    np.testing.assert_array_equal(
+        ec.fit(with_intensity).labels_, ec.fit(padded).labels_
+    )
+
+
+def test_duplicated_points_are_one_cluster():
+    xyz = np.repeat([[0.0, 0, 0], [5.0, 5, 5]], 10, axis=0)
+    labels = euclidean_clusters(xyz, eps=0.1, min_cluster_size=1)
+    assert labels.tolist() == [0] * 10 + [1] * 10
+
+
+@pytest.mark.parametrize(
+    ("X", "match"),
+    [
+        (np.zeros((0, 3)), r"0 sample\(s\)"),
+        (np.array([[0.0, 0, np.nan]]), "NaN"),
+        (np.array([[0.0, 0, np.inf]]), "infinity"),
+        (np.zeros(3), "Expected 2D array"),
+        (np.zeros((2, 3, 3)), "Found array with dim 3"),
+        ([np.zeros((4, 3)), np.zeros((5, 3))], "sequence of clouds"),
+    ],
+)
+@pytest.mark.parametrize(
+    "est", [EuclideanClusters(), AutoEpsDBSCAN(), GroundFilter()], ids=type
+)
+def test_bad_input_is_a_clear_error(est, X, match):
+    with pytest.raises(ValueError, match=match):
+        clone(est).fit(X)
+
+
+def test_auto_eps_needs_two_points():
+    with pytest.raises(ValueError, match="minimum of 2 is required"):
+        AutoEpsDBSCAN().fit([[0.0, 0.0, 0.0]])
+    assert AutoEpsDBSCAN(eps=1.0, min_samples=1).fit([[0.0, 0, 0]]).labels_ == [0]
+
+
+def test_memory_is_linear_not_neighbourhoods():
+    # 60k points in a 2 m cube, eps 0.3: about 2000 neighbours per point,
+    # 120 million pairs (a gigabyte as sklearn's neighbourhoods); the grid
+    # DBSCAN allocates O(n_points)
+    xyz = np.random.default_rng(0).random((60_000, 3)) * 2
+    grid_dbscan(xyz, 0.3, 10)  # compile outside the measurement
+    tracemalloc.start()
+    labels, _ = grid_dbscan(xyz, 0.3, 10)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    assert labels.max() == 0
+    assert peak < 120 * len(xyz), peak
+
+
+# GroundFilter needs x, y and z: the checks that fit it on 2 features fail
+# with its clear error; the clusterers pass every check.
+GROUND_EXPECTED_FAILURES = dict.fromkeys(
+    (
+        "check_estimators_overwrite_params",
+        "check_estimators_fit_returns_self",
+        "check_readonly_memmap_input",
+        "check_fit_idempotent",
+        "check_fit_check_is_fitted",
+        "check_n_features_in",
+    ),
+    "GroundFilter needs 3 columns; the check fits it on 2",
+)
+
+
+@parametrize_with_checks(
+    [
+        AutoEpsDBSCAN(n_neighbors=5, random_state=0),
+        EuclideanClusters(eps=0.5, min_cluster_size=1),
+        GroundFilter(),
+    ],
+    expected_failed_checks=lambda est: (
+        GROUND_EXPECTED_FAILURES if isinstance(est, GroundFilter) else {}
+    ),
+)
+def test_sklearn_compatible(estimator, check):
+    check(estimator)
