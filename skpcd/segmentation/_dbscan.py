@@ -51,7 +51,7 @@ def _fit_knee(k, mean, degree):
     grid = np.linspace(k[0], k[-1], _KNEE_GRID)
     y = poly(grid)
     span = y.max() - y.min()
-    if not span > 0:
+    if not span > 1e-9 * np.abs(y).max():  # flat (up to rounding): no knee
         knee = grid[0]
     else:
         x = (grid - grid[0]) / (grid[-1] - grid[0])

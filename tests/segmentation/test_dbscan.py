@@ -1,0 +1,118 @@
+"""AutoEpsDBSCAN: the distance curve, its fit and knee, the estimate, the plot."""
+
+import numpy as np
+import pytest
+from scipy.spatial.distance import cdist
+from sklearn.base import clone
+from sklearn.cluster import DBSCAN
+
+from skpcd.segmentation import AutoEpsDBSCAN, estimate_eps, plot_eps_curve
+from skpcd.segmentation._dbscan import _fit_knee
+
+
+def _plane(n_side, spacing, z=0.0):
+    g = np.stack(np.meshgrid(np.arange(n_side), np.arange(n_side), [0.0]), -1)
+    return spacing * g.reshape(-1, 3).astype(float) + [0, 0, z]
+
+
+def test_curve_is_the_mean_kth_neighbour_distance():
+    xyz = np.random.default_rng(0).random((300, 3))
+    db = AutoEpsDBSCAN(n_neighbors=12, max_samples=None).fit(xyz)
+    d = np.sort(cdist(xyz, xyz), axis=1)[:, 1:13]
+    np.testing.assert_array_equal(db.curve_k_, np.arange(1, 13))
+    np.testing.assert_allclose(db.curve_distances_, d.mean(axis=0), rtol=1e-12)
+    assert db.eps_ == pytest.approx(db.curve_(db.knee_))
+    assert 1 <= db.knee_ <= 12
+
+
+def test_knee_of_known_curves():
+    k = np.arange(1, 31)
+    # a concave curve (neighbours spread over a surface: sqrt(k)); the knee
+    # of sqrt on [1, K] is where its slope equals the chord's
+    expected = ((np.sqrt(30) + 1) / 2) ** 2
+    _, knee, eps = _fit_knee(k, np.sqrt(k), degree=8)
+    assert knee == pytest.approx(expected, abs=0.3)
+    assert eps == pytest.approx(np.sqrt(knee), rel=0.01)
+    # the default cubic smooths the curve: the knee moves by about 1
+    _, knee, eps = _fit_knee(k, np.sqrt(k), degree=3)
+    assert knee == pytest.approx(expected, abs=1.5)
+    # a straight line has no knee worth the name; a flat curve gives k=1
+    _, knee, eps = _fit_knee(k, np.full(30, 0.5), degree=3)
+    assert (knee, eps) == (1.0, pytest.approx(0.5))
+
+
+def test_eps_scales_with_spacing_and_is_translation_invariant():
+    a = estimate_eps(_plane(60, 0.1))
+    b = estimate_eps(_plane(60, 0.3))
+    assert 0.1 < a < 0.5
+    assert b == pytest.approx(3 * a, rel=1e-6)
+    moved = estimate_eps(_plane(60, 0.1) + np.array([5e5, 4e6, 120.0]))
+    assert moved == pytest.approx(a, rel=1e-6)
+
+
+def test_sampled_curve_is_reproducible_and_close():
+    xyz = np.random.default_rng(1).random((20_000, 3)) * [20, 20, 1]
+    full = AutoEpsDBSCAN(max_samples=None).fit(xyz)
+    s1 = AutoEpsDBSCAN(max_samples=3000, random_state=0).fit(xyz)
+    s2 = AutoEpsDBSCAN(max_samples=3000, random_state=0).fit(xyz)
+    assert s1.eps_ == s2.eps_
+    np.testing.assert_array_equal(s1.labels_, s2.labels_)
+    assert s1.eps_ == pytest.approx(full.eps_, rel=0.03)
+
+
+def test_separates_planes_and_isolates_noise():
+    rng = np.random.default_rng(0)
+    plane = np.column_stack([rng.random((3000, 2)) * 5, np.zeros(3000)])
+    noise = rng.uniform([-20, -20, 5], [30, 30, 30], (40, 3))
+    xyz = np.vstack(
+        [plane, plane + np.array([8, 0, 0]), plane + np.array([0, 0, 4]), noise]
+    )
+    db = AutoEpsDBSCAN(random_state=0).fit(xyz)
+    assert db.n_clusters_ == 3
+    assert (db.labels_[-40:] == -1).all()
+    for i in range(3):
+        assert len(np.unique(db.labels_[i * 3000 : (i + 1) * 3000])) == 1
+
+
+def test_given_eps_is_plain_dbscan():
+    xyz = np.random.default_rng(2).random((800, 3)) * 4
+    db = AutoEpsDBSCAN(eps=0.3, min_samples=4).fit(xyz)
+    sk = DBSCAN(eps=0.3, min_samples=4).fit(xyz)
+    np.testing.assert_array_equal(db.core_sample_indices_, sk.core_sample_indices_)
+    np.testing.assert_array_equal(db.labels_ < 0, sk.labels_ < 0)
+    assert db.eps_ == 0.3 and db.curve_ is None and len(db.curve_k_) == 0
+
+
+def test_tiny_and_degenerate_clouds():
+    # fewer points than n_neighbors: the curve is shorter
+    db = AutoEpsDBSCAN(min_samples=2).fit(_plane(3, 1.0))
+    assert len(db.curve_k_) == 8
+    assert db.n_clusters_ == 1
+    db = AutoEpsDBSCAN(min_samples=1).fit([[0.0, 0, 0], [1.0, 0, 0]])
+    assert db.eps_ == pytest.approx(1.0) and db.labels_.tolist() == [0, 0]
+    with pytest.raises(ValueError, match="duplicated points"):
+        AutoEpsDBSCAN().fit(np.zeros((50, 3)))
+
+
+def test_clone_and_params():
+    db = AutoEpsDBSCAN(min_samples=7, n_neighbors=20)
+    again = clone(db)
+    assert again.get_params() == db.get_params()
+    assert not hasattr(again, "eps_")
+    with pytest.raises(ValueError, match="n_neighbors"):
+        AutoEpsDBSCAN(n_neighbors=1).fit(_plane(5, 1.0))
+
+
+def test_plot_eps_curve():
+    matplotlib = pytest.importorskip("matplotlib")
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    db = AutoEpsDBSCAN().fit(_plane(30, 0.2))
+    ax = plot_eps_curve(db)
+    assert ax.get_ylabel() == "distance"
+    assert len(ax.lines) == 3
+    assert f"eps={db.eps_:.3f}" in ax.get_legend().get_texts()[2].get_text()
+    plt.close("all")
+    with pytest.raises(ValueError, match="no curve"):
+        plot_eps_curve(AutoEpsDBSCAN(eps=1.0).fit(_plane(5, 1.0)))

@@ -1,0 +1,131 @@
+"""GroundFilter (SMRF): terrain with objects, slopes, holes, low noise, API."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from skpcd.segmentation import GROUND_PRESETS, GroundFilter
+from skpcd.segmentation._ground import _inpaint, _opening
+
+
+def _terrain(n, size, seed, slope=0.05):
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(0, size, (n, 2))
+    z = slope * xy[:, 0] + 0.5 * np.sin(xy[:, 1] / 7.0) + rng.normal(0, 0.02, n)
+    return np.column_stack([xy, z])
+
+
+def _box(lo, hi, n, seed, terrain_z):
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(lo, hi, (n, 3))
+    pts[:, 2] += terrain_z
+    return pts
+
+
+def _scene(seed=0):
+    ground = _terrain(30_000, 60, seed)
+    # a building 14 m wide (walls and roof), a car, a pole: 1 m or more up
+    zb = 0.05 * 20 + 0.5 * np.sin(20 / 7.0)
+    objects = [
+        _box([13, 13, 1.0], [27, 27, 8.0], 4000, seed + 1, zb),
+        _box([40, 40, 1.0], [44, 42, 1.6], 300, seed + 2, 2.0 + 0.5 * np.sin(41 / 7)),
+        _box([10, 45, 1.0], [10.3, 45.3, 9.0], 200, seed + 3, 0.5 + 0.5 * np.sin(6.4)),
+    ]
+    return ground, np.vstack(objects)
+
+
+def test_terrain_and_objects():
+    ground, objects = _scene()
+    gf = GroundFilter().fit(np.vstack([ground, objects]))
+    assert gf.ground_[: len(ground)].mean() > 0.995
+    assert gf.ground_[len(ground) :].mean() < 0.01
+    # the DEM follows the terrain, under the building too
+    h = gf.height(ground)
+    assert np.percentile(np.abs(h), 99) < 0.15
+
+
+def test_predict_matches_fit_and_new_points():
+    ground, objects = _scene(1)
+    X = np.vstack([ground, objects])
+    gf = GroundFilter().fit(X)
+    np.testing.assert_array_equal(gf.predict(X), gf.ground_)
+    np.testing.assert_array_equal(GroundFilter().fit_predict(X), gf.ground_)
+    more_ground, more_objects = _scene(7)
+    assert gf.predict(more_ground).mean() > 0.99
+    assert gf.predict(more_objects).mean() < 0.02
+
+
+def test_holes_are_interpolated():
+    ground = _terrain(20_000, 50, 3, slope=0.08)
+    hole = np.hypot(ground[:, 0] - 25, ground[:, 1] - 25) < 8
+    gf = GroundFilter().fit(ground[~hole])
+    assert gf.predict(ground[hole]).mean() > 0.99
+
+
+def test_low_noise_is_not_ground_and_does_not_dig_the_dem():
+    ground = _terrain(20_000, 50, 4)
+    rng = np.random.default_rng(5)
+    low = ground[rng.choice(len(ground), 15, replace=False)] - [0, 0, 4.0]
+    gf = GroundFilter().fit(np.vstack([ground, low]))
+    assert not gf.ground_[len(ground) :].any()
+    assert gf.ground_[: len(ground)].mean() > 0.995
+    # without the low-noise test the pits take the ground around them
+    kept = GroundFilter(low_noise=None).fit(np.vstack([ground, low]))
+    assert kept.ground_[: len(ground)].mean() < gf.ground_[: len(ground)].mean()
+
+
+def test_presets():
+    assert GroundFilter().get_params() == {**GROUND_PRESETS["aerial"], "low_noise": 1.0}
+    mobile = GroundFilter(**GROUND_PRESETS["mobile"])
+    assert mobile.cell == 0.5 and mobile.threshold < GroundFilter().threshold
+
+
+@settings(max_examples=10, deadline=None)
+@given(
+    shift=st.tuples(
+        st.floats(-1e5, 1e5, allow_nan=False),
+        st.floats(-1e5, 1e5, allow_nan=False),
+        st.floats(-500, 500, allow_nan=False),
+    )
+)
+def test_translation_invariance(shift):
+    ground, objects = _scene(2)
+    X = np.vstack([ground, objects])
+    ref = GroundFilter().fit_predict(X)
+    moved = GroundFilter().fit_predict(X + np.asarray(shift))
+    # the raster is anchored at the lowest corner of the scene; rounding of
+    # large coordinates may move a point on a cell edge
+    assert (moved == ref).mean() > 0.999
+
+
+def test_opening_and_inpaint_helpers():
+    z = np.zeros((9, 9))
+    z[4, 4] = 5.0  # a one-cell spike goes, a plateau wider than the disk stays
+    assert _opening(z, 1).max() == 0.0
+    z[2:7, 2:7] = 3.0
+    assert _opening(z, 1)[4, 4] == 3.0
+    # harmonic fill is exact on linear surfaces
+    yy, xx = np.mgrid[0:20, 0:30]
+    plane = 0.3 * xx - 0.1 * yy
+    known = np.ones_like(plane, dtype=bool)
+    known[5:12, 8:20] = False
+    np.testing.assert_allclose(_inpaint(np.where(known, plane, 0), known), plane)
+
+
+def test_bad_input():
+    with pytest.raises(ValueError, match="needs at least 3"):
+        GroundFilter().fit(np.zeros((10, 2)))
+    with pytest.raises(ValueError, match="use a larger cell"):
+        GroundFilter(cell=0.001).fit([[0.0, 0, 0], [1e5, 1e5, 0]])
+    with pytest.raises(ValueError, match="cell"):
+        GroundFilter(cell=0).fit(np.zeros((10, 3)))
+    gf = GroundFilter().fit(_terrain(100, 10, 0))
+    with pytest.raises(ValueError, match="features"):
+        gf.predict(np.zeros((3, 4)))
+
+
+def test_single_point_and_flat_line():
+    assert GroundFilter().fit_predict([[1.0, 2.0, 3.0]]).tolist() == [True]
+    line = np.column_stack([np.linspace(0, 10, 50), np.zeros(50), np.zeros(50)])
+    assert GroundFilter().fit_predict(line).all()
