@@ -284,6 +284,198 @@ def _cmd_describe(args):
     return 0
 
 
+# --- scene segmentation: ``skpcd segment`` and ``skpcd identify`` ---------
+
+
+def _add_segmentation_options(p):
+    """The options of :func:`skpcd.segment_scene`, shared by segment/identify."""
+    p.add_argument(
+        "--ground",
+        choices=("aerial", "mobile", "none"),
+        default="aerial",
+        help="ground removal preset (GroundFilter, SMRF), or none (default aerial)",
+    )
+    p.add_argument(
+        "--method",
+        choices=("dbscan", "euclidean"),
+        default="dbscan",
+        help="dbscan: AutoEpsDBSCAN, eps from the data unless --eps; euclidean: "
+        "EuclideanClusters, eps 0.2 unless --eps (default dbscan)",
+    )
+    p.add_argument("--eps", type=float, default=None, help="clustering radius (m)")
+    p.add_argument(
+        "--min-samples", type=int, default=5, help="DBSCAN core count (default 5)"
+    )
+    p.add_argument(
+        "--min-size", type=int, default=50, help="smallest segment kept (default 50)"
+    )
+    p.add_argument("--max-size", type=int, default=None, help="largest segment kept")
+    p.add_argument("--random-state", type=int, default=0, help="seed (default 0)")
+    p.add_argument("--n-jobs", type=int, default=None, help="threads (-1: all cores)")
+    p.add_argument("--overwrite", action="store_true", help="replace the outputs")
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+
+
+def _segment_file(args, command, fields=None):
+    """Read SCENE and segment it; returns ``(points, extras, result)``."""
+    from skpcd.io import read_point_cloud
+    from skpcd.segmentation import segment_scene
+
+    read = read_point_cloud(args.scene, fields=fields)
+    points, extras = read if fields else (read, {})
+    start = time.perf_counter()
+    try:
+        result = segment_scene(
+            points,
+            ground=None if args.ground == "none" else args.ground,
+            method=args.method,
+            eps=args.eps,
+            min_samples=args.min_samples,
+            min_cluster_size=args.min_size,
+            max_cluster_size=args.max_size,
+            random_state=args.random_state,
+            n_jobs=args.n_jobs,
+        )
+    except ValueError as exc:
+        raise SystemExit(f"skpcd {command}: {exc}") from exc
+    if not args.quiet:
+        labels = result.labels
+        print(
+            f"scene     {args.scene}: {len(points)} points, "
+            f"{int(result.ground.sum())} ground"
+        )
+        print(
+            f"segments  {result.n_segments} ({args.method}, eps {result.eps:.3f}); "
+            f"{int(((labels < 0) & ~result.ground).sum())} points in none "
+            f"({time.perf_counter() - start:.1f} s)"
+        )
+    return points, extras, result
+
+
+def _segment_members(labels, n_segments):
+    """Point indices of each segment, in one sort."""
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(n_segments + 1))
+    return [order[bounds[i] : bounds[i + 1]] for i in range(n_segments)]
+
+
+def _cmd_segment(args):
+    import csv
+
+    from skpcd.io import write_point_cloud
+
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise SystemExit(f"skpcd segment: {out} exists and is not a folder")
+    if (out / "segments.csv").exists() and not args.overwrite:
+        raise SystemExit(
+            f"skpcd segment: {out} already holds segments.csv; pass --overwrite "
+            "to replace its files"
+        )
+    points, extras, result = _segment_file(
+        args, "segment", "all" if args.keep_fields else None
+    )
+    n = result.n_segments
+    width = max(4, len(str(n - 1)))
+    names = [f"segment_{i:0{width}d}.{args.format}" for i in range(n)]
+    summary = out / "segments.csv"
+    clash = [p for p in [summary, *(out / f for f in names)] if p.exists()]
+    if clash and not args.overwrite:
+        shown = ", ".join(str(p) for p in clash[:3]) + (
+            " ..." if len(clash) > 3 else ""
+        )
+        raise SystemExit(
+            f"skpcd segment: {len(clash)} output file(s) exist ({shown}); pass "
+            "--overwrite to replace them"
+        )
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for i, idx in enumerate(_segment_members(result.labels, n)):
+        seg = points[idx]
+        fields = {name: values[idx] for name, values in extras.items()}
+        write_point_cloud(
+            out / names[i], seg, fields=fields or None, overwrite=args.overwrite
+        )
+        lo, hi = seg.min(axis=0), seg.max(axis=0)
+        rows.append([names[i], i, len(idx), *lo, *hi, *(hi - lo)])
+    tmp = summary.with_name(f".{summary.name}.tmp")
+    with open(tmp, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(
+            ["file", "segment", "n_points"]
+            + [f"{a}_{c}" for a in ("min", "max", "extent") for c in "xyz"]
+        )
+        for row in rows:
+            writer.writerow(row[:3] + [f"{v:.4f}" for v in row[3:]])
+    tmp.replace(summary)
+    if not args.quiet:
+        print(f"written   {n} {args.format} files and {summary.name} -> {out}")
+    return 0
+
+
+def _cmd_identify(args):
+    import csv
+
+    from skpcd.io import load_model, write_point_cloud
+
+    out = _check_output(args.output, args.overwrite, "identify")
+    legend = out.with_name(f"{out.stem}_classes.csv")
+    _check_output(legend, args.overwrite, "identify")
+    model = load_model(args.model)
+    points, _, result = _segment_file(args, "identify")
+    n = result.n_segments
+    members = _segment_members(result.labels, n)
+    classes = np.asarray(getattr(model, "classes_", []))
+    segment_class = np.full(n, -1, dtype=np.int64)
+    segment_score = np.full(n, np.nan)
+    kind = None
+    if n:
+        clouds = [points[idx] for idx in members]
+        pred = np.asarray(model.predict(clouds))
+        kind, score = _scores(model, clouds, pred)
+        if len(classes) == 0:
+            classes = np.unique(pred)
+        index = {c: j for j, c in enumerate(classes)}
+        segment_class = np.array([index[p] for p in pred], dtype=np.int64)
+        if kind:
+            segment_score = np.asarray(score, dtype=np.float64)
+    labels = result.labels
+    inside = labels >= 0
+    point_class = np.full(len(points), -1, dtype=np.int32)
+    point_class[inside] = segment_class[labels[inside]]
+    fields = {
+        "segment": labels.astype(np.int32),
+        "class": point_class,
+        "ground": result.ground.astype(np.uint8),
+    }
+    if kind:
+        score = np.full(len(points), np.nan, dtype=np.float32)
+        score[inside] = segment_score[labels[inside]]
+        fields[kind] = score
+    write_point_cloud(out, points, fields=fields, overwrite=args.overwrite)
+    tmp = legend.with_name(f".{legend.name}.tmp")
+    with open(tmp, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["class", "name", "n_segments", "n_points"])
+        writer.writerow([-1, "(no segment)", 0, int((~inside).sum())])
+        for j, c in enumerate(classes):
+            writer.writerow(
+                [j, c, int((segment_class == j).sum()), int((point_class == j).sum())]
+            )
+    tmp.replace(legend)
+    if not args.quiet:
+        counts = ", ".join(
+            f"{c} {int((segment_class == j).sum())}" for j, c in enumerate(classes)
+        )
+        print(f"classes   {counts or 'none'}")
+        print(
+            f"written   {out} (fields segment, class, ground"
+            + (f", {kind}" if kind else "")
+            + f"); class names in {legend.name}"
+        )
+    return 0
+
+
 def build_parser():
     """The argument parser of the ``skpcd`` command, one subparser per command.
 
@@ -383,6 +575,47 @@ def build_parser():
             )
         p.add_argument("--overwrite", action="store_true", help="replace the output")
         p.add_argument("--quiet", action="store_true", help="no progress bars")
+
+    seg = sub.add_parser(
+        "segment",
+        help="cut a scene into segments, one file each",
+        description="Remove the ground (SMRF), cluster the rest (DBSCAN with "
+        "automatic eps, or Euclidean clusters), keep segments within the size "
+        "range and write one file per segment plus segments.csv (points and "
+        "extents of each). Existing files are kept unless --overwrite.",
+    )
+    seg.add_argument("scene", help="a point-cloud file (.ply .pcd .las .laz .xyz ...)")
+    seg.add_argument("-o", "--output", required=True, help="output folder")
+    seg.add_argument(
+        "--format",
+        default="ply",
+        choices=("ply", "pcd", "las", "laz", "xyz", "txt", "csv", "npy"),
+        help="format of the segment files (default ply)",
+    )
+    seg.add_argument(
+        "--keep-fields",
+        action="store_true",
+        help="copy the scene's extra fields (intensity...) into the segments",
+    )
+    _add_segmentation_options(seg)
+    seg.set_defaults(func=_cmd_segment)
+
+    ident = sub.add_parser(
+        "identify",
+        help="segment a scene and label each segment with a saved model",
+        description="Segment a scene as 'skpcd segment' does, predict the class "
+        "of each segment with a model written by 'skpcd fit', and write the "
+        "scene with per-point fields segment (-1: none), class (index, -1: "
+        "none), ground (1/0) and the probability or similarity of the answer. "
+        "Class names go to OUTPUT_classes.csv beside the output.",
+    )
+    ident.add_argument("scene", help="a point-cloud file")
+    ident.add_argument("--model", required=True, help="a model written by skpcd fit")
+    ident.add_argument(
+        "-o", "--output", required=True, help="labelled scene (.ply, .pcd, .las...)"
+    )
+    _add_segmentation_options(ident)
+    ident.set_defaults(func=_cmd_identify)
     return parser
 
 

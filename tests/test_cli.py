@@ -148,3 +148,106 @@ def test_predict_with_a_bad_model_file_is_a_clean_error(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "not a model file" in err and "Traceback" not in err
     assert not out.exists()
+
+
+# --- skpcd segment / skpcd identify -------------------------------------------
+
+
+def _scene_file(path, n_per_class=2, random_state=0):
+    """Synthetic urban objects on a terrain, written to ``path`` with an
+    intensity field; returns the points and the true object of each."""
+    from skpcd.datasets import make_urban_objects
+    from skpcd.segmentation import make_scene
+
+    clouds, labels = make_urban_objects(
+        n_per_class=n_per_class, random_state=random_state
+    )
+    points, truth = make_scene(clouds, gap=3.0, random_state=random_state)
+    write_point_cloud(path, points, fields={"intensity": np.arange(len(points))})
+    return points, truth, labels
+
+
+def test_segment_writes_one_file_per_segment_and_a_summary(tmp_path, capsys):
+    import csv
+
+    from skpcd.io import read_point_cloud, read_segments
+
+    scene = tmp_path / "scene.ply"
+    points, truth, _ = _scene_file(scene)
+    out = tmp_path / "segs"
+    args = ["segment", str(scene), "-o", str(out), "--eps", "1.0", "--min-size", "30"]
+    assert main([*args, "--keep-fields"]) == 0
+    assert "segments  10 " in capsys.readouterr().out
+    rows = list(csv.DictReader((out / "segments.csv").open()))
+    assert len(rows) == 10
+    clouds, _, names = read_segments(str(out / "*.ply"))
+    assert names == [r["file"] for r in rows]
+    for row, cloud in zip(rows, clouds):
+        assert int(row["n_points"]) == len(cloud)
+        np.testing.assert_allclose(
+            [float(row[f"extent_{c}"]) for c in "xyz"], np.ptp(cloud, axis=0), atol=1e-3
+        )
+    # every segment is one object, whole above the ground threshold
+    first, extras = read_point_cloud(out / rows[0]["file"], fields=["intensity"])
+    objects = truth[extras["intensity"].astype(int)]
+    assert len(np.unique(objects)) == 1 and objects[0] >= 0
+    np.testing.assert_allclose(
+        first, points[extras["intensity"].astype(int)], atol=1e-4
+    )
+    # never overwritten without asking; other formats on demand
+    before = (out / rows[0]["file"]).read_bytes()
+    with pytest.raises(SystemExit, match="--overwrite"):
+        main(args)
+    assert (out / rows[0]["file"]).read_bytes() == before
+    assert main([*args, "--overwrite", "--quiet", "--format", "xyz"]) == 0
+    assert capsys.readouterr().out == ""
+    assert len(list(out.glob("*.xyz"))) == 10
+
+
+def test_identify_writes_the_labelled_scene(tmp_path, capsys):
+    import csv
+
+    from skpcd.io import read_point_cloud
+
+    _labelled_folder(tmp_path / "train", n_per_class=8)
+    model = tmp_path / "model.joblib"
+    assert main(["fit", str(tmp_path / "train"), "-o", str(model), "--quiet"]) == 0
+    scene = tmp_path / "scene.pcd"
+    points, truth, labels = _scene_file(scene, random_state=3)
+    out = tmp_path / "labelled.ply"
+    args = ["identify", str(scene), "--model", str(model), "-o", str(out)]
+    assert main([*args, "--eps", "1.0", "--min-size", "30"]) == 0
+    assert "classes   " in capsys.readouterr().out
+    xyz, f = read_point_cloud(out, fields=["segment", "class", "ground", "probability"])
+    np.testing.assert_allclose(xyz, points, atol=1e-3)
+    segment, cls = f["segment"].astype(int), f["class"].astype(int)
+    assert ((segment < 0) == (cls < 0)).all()
+    assert f["ground"][truth == -1].mean() > 0.99
+    legend = list(csv.DictReader((tmp_path / "labelled_classes.csv").open()))
+    names = {int(r["class"]): r["name"] for r in legend}
+    assert names[-1] == "(no segment)"
+    assert sorted(v for k, v in names.items() if k >= 0) == sorted(set(labels))
+    # the synthetic objects are told apart: most segments get their class
+    right = []
+    for s in range(segment.max() + 1):
+        objects, counts = np.unique(truth[segment == s], return_counts=True)
+        right.append(names[cls[segment == s][0]] == labels[objects[counts.argmax()]])
+    assert np.mean(right) >= 0.8
+    p = f["probability"][segment >= 0]
+    assert ((p > 0) & (p <= 1)).all()
+    with pytest.raises(SystemExit, match="exists; pass --overwrite"):
+        main(args)
+
+
+def test_segment_and_identify_bad_inputs(tmp_path, capsys):
+    assert main(["segment", str(tmp_path / "missing.ply"), "-o", str(tmp_path)]) == 1
+    assert "error" in capsys.readouterr().err
+    bad = tmp_path / "bad.xyz"
+    bad.write_text("0 0 0\n")
+    model = tmp_path / "model.joblib"
+    model.write_text("not a model")
+    out = tmp_path / "o.ply"
+    assert main(["identify", str(bad), "--model", str(model), "-o", str(out)]) == 1
+    assert not out.exists()
+    with pytest.raises(SystemExit, match="not a folder"):
+        main(["segment", str(bad), "-o", str(bad)])
