@@ -117,3 +117,16 @@ def test_ragged_checks_supervised_pipeline():
 @pytest.mark.filterwarnings("ignore:labels .* of groups do not occur in y")
 def test_sklearn_checks(estimator, check):
     check(estimator)
+
+
+# Scene estimators: X is one cloud, a 2-D array; sklearn's full checks run
+# in tests/segmentation/test_clusters.py, the data-free ones here.
+from skpcd.segmentation import AutoEpsDBSCAN, EuclideanClusters, GroundFilter  # noqa: E402
+
+SCENE = [AutoEpsDBSCAN(), EuclideanClusters(), GroundFilter()]
+
+
+@pytest.mark.parametrize("check", DATA_FREE_CHECKS, ids=_id)
+@pytest.mark.parametrize("estimator", SCENE, ids=_id)
+def test_sklearn_data_free_checks_scene(estimator, check):
+    check(type(estimator).__name__, estimator)
