@@ -1,0 +1,100 @@
+"""
+Cut a scene into objects: ground removal and DBSCAN with automatic eps
+=======================================================================
+
+A scan comes as one cloud, not as objects. :func:`skpcd.segment_scene` removes the
+ground with :class:`~skpcd.segmentation.GroundFilter` (SMRF) and clusters the rest with
+:class:`~skpcd.segmentation.AutoEpsDBSCAN`, whose radius comes from the curve of the
+mean k-th nearest-neighbour distance (Wang et al., 2019).
+
+To see how well it works we need a scene whose objects we know:
+:func:`~skpcd.segmentation.make_scene` places real DALES objects on a synthetic terrain,
+with gaps between them, holes in the ground and noise points.
+"""
+
+import os
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+from sklearn.metrics import adjusted_rand_score
+
+from skpcd.datasets import make_urban_objects
+from skpcd.io import read_segments
+from skpcd.segmentation import AutoEpsDBSCAN, make_scene, plot_eps_curve, segment_scene
+
+folder = Path(os.environ.get("SKPCD_DALES_DIR", "../../shared/data/dales_objects"))
+if (folder / "labels.csv").is_file():
+    clouds, labels, _ = read_segments(folder, folder / "labels.csv")
+    source = "DALES objects"
+else:  # no real data here: the embedded synthetic objects
+    clouds, labels = make_urban_objects(n_per_class=40, random_state=0)
+    source = "synthetic urban objects"
+
+rng = np.random.default_rng(0)
+pick = np.concatenate(
+    [
+        rng.choice(np.flatnonzero(labels == c), 5, replace=False)
+        for c in np.unique(labels)
+    ]
+)
+points, truth = make_scene([clouds[i] for i in pick], gap=3.0, random_state=0)
+print(f"{source}: {len(pick)} objects, a scene of {len(points)} points")
+
+# %%
+# Segment the scene
+# -----------------
+# First with the radius estimated from the data, then with a radius of 1.2 m, wide
+# enough to bridge the sparse parts of real objects (pole arms, fence gaps, thin
+# canopy) and still below the 3 m gaps between objects. The adjusted Rand index
+# compares the segments with the objects over the object points (the lowest of which
+# the ground filter takes as ground).
+auto = segment_scene(points, min_cluster_size=30)
+fixed = segment_scene(points, eps=1.2, min_cluster_size=30)
+
+scored = truth >= 0
+for name, seg in (("automatic eps", auto), ("eps = 1.2 m", fixed)):
+    ari = adjusted_rand_score(truth[scored], seg.labels[scored])
+    print(
+        f"{name:>14}: eps {seg.eps:.2f} m, {seg.n_segments} segments, "
+        f"{int(seg.ground.sum())} ground points, ARI {ari:.3f}"
+    )
+
+# %%
+# The segments, in colour
+# -----------------------
+# Ground in light grey, points in no segment (noise, fragments smaller than 30 points)
+# in black.
+
+
+def draw(ax, seg, title):
+    n = max(seg.n_segments, 1)
+    colours = plt.get_cmap("turbo")(np.random.default_rng(1).permutation(n) / n)
+    step = max(1, len(points) // 60_000)
+    p, lab, g = points[::step], seg.labels[::step], seg.ground[::step]
+    ax.scatter(*p[g, :2].T, s=0.2, color="0.85")
+    none = (lab < 0) & ~g
+    ax.scatter(*p[none, :2].T, s=0.5, color="k")
+    ax.scatter(*p[lab >= 0, :2].T, s=1.0, color=colours[lab[lab >= 0]])
+    ax.set_title(title)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+
+
+fig, axes = plt.subplots(1, 2, figsize=(11, 5.5), sharey=True)
+draw(axes[0], auto, f"automatic eps = {auto.eps:.2f} m: {auto.n_segments} segments")
+draw(axes[1], fixed, f"eps = 1.2 m: {fixed.n_segments} segments")
+axes[0].set_ylabel("y (m)")
+fig.tight_layout()
+plt.show()
+
+# %%
+# The distance curve behind the automatic eps
+# -------------------------------------------
+# The mean distance to the k-th nearest neighbour grows with k; eps is the fitted
+# curve's value at its knee. It measures how far apart the points of a surface are, so
+# it follows the sampling density of the scan.
+db = AutoEpsDBSCAN(random_state=0).fit(points[~auto.ground])
+plot_eps_curve(db)
+plt.tight_layout()
+plt.show()
