@@ -20,7 +20,7 @@ from skpcd.preprocessing._normals import (
     pack_neighborhoods,
 )
 from skpcd.utils import check_point_clouds
-from skpcd.utils._parallel import parallel_rows
+from skpcd.utils._parallel import parallel_rows, release_free_memory
 
 __all__ = ["FPFHTransformer", "PFHTransformer", "compute_fpfh", "compute_pfh"]
 
@@ -101,10 +101,12 @@ def _pfh_packed(p, n, nb, n_bins, n_jobs):
 _TABLE_PAIRS = 255
 
 
-def _spfh_counts(p, n, nb, n_bins, n_jobs):
+def _spfh_counts(p, n, nb, n_bins, n_jobs, pack=False):
     """SPFH as pair counts per bin, and the table of PCL's increment sums.
 
-    One byte per bin (two above 255 neighbours), not a float32's four.
+    One byte per bin (two above 255 neighbours), not a float32's four; with
+    ``pack``, and no point with more than 15 pairs, two 4-bit counts per byte
+    (see :func:`~skpcd.features._pfh_kernels.spfh_rows`).
     """
     from skpcd.features import _pfh_kernels as k
 
@@ -112,7 +114,10 @@ def _spfh_counts(p, n, nb, n_bins, n_jobs):
     dtype = (
         np.uint8 if max_pairs <= 255 else np.uint16 if max_pairs < 2**16 else np.uint32
     )
-    counts = np.zeros((len(p), 3 * n_bins), dtype=dtype)
+    width = 3 * n_bins
+    if pack and max_pairs <= 15:
+        width = (width + 1) // 2
+    counts = np.zeros((len(p), width), dtype=dtype)
     args = (p, n, nb.indptr, nb.indices, n_bins, counts)
     parallel_rows(k.spfh_rows, len(p), n_jobs, *args)
     return counts, k.increment_sums(min(max_pairs, _TABLE_PAIRS))
@@ -130,7 +135,7 @@ def _spfh(p, n, nb, n_bins, n_jobs=None):
 
 def _fpfh_packed(p, n, nb, n_bins, convention, n_jobs):
     """SPFH (as pair counts) then FPFH kernels over float32 packed arrays."""
-    counts, table = _spfh_counts(p, n, nb, n_bins, n_jobs)
+    counts, table = _spfh_counts(p, n, nb, n_bins, n_jobs, pack=True)
     return _fpfh_from_counts(p, counts, table, nb, n_bins, convention, n_jobs)
 
 
@@ -257,10 +262,34 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         self.n_features_in_ = clouds[0].shape[1]
         return self
 
-    def _compute(self, X):
-        """Packed descriptors, the undefined-point mask and the cloud offsets."""
+    @_fit_context(prefer_skip_nested_validation=True)
+    def fit_transform(self, X, y=None):
+        """Fit and transform, checking the clouds once.
+
+        Parameters
+        ----------
+        X : sequence of ndarray of shape (n_points_i, 3+)
+            The clouds, with normals in columns 3-5 when
+            ``normals="columns"``.
+        y : None
+            Ignored.
+
+        Returns
+        -------
+        descriptors : list of ndarray or ndarray
+            As :meth:`transform`.
+        """
         self._check_search()
         clouds = self._validate(X)
+        self.n_features_in_ = clouds[0].shape[1]
+        return self._transform(X, clouds)
+
+    def _compute(self, X, clouds=None):
+        """Packed descriptors, the undefined-point mask and the cloud offsets
+        (``clouds``: X already validated)."""
+        self._check_search()
+        if clouds is None:
+            clouds = self._validate(X)
         k = self.n_neighbors
         if k is None and self.radius is None:
             k = self._default_n_neighbors
@@ -290,6 +319,9 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         # soon as it no longer needs them (FPFH: after the SPFH)
         normals = [n]
         del n
+        # the search's temporaries are freed: return their pages to the system
+        # before the kernels allocate the output (lower peak memory)
+        release_free_memory()
         out = self._kernel(p, normals, nb)
         return out, undefined, offsets
 
@@ -329,7 +361,10 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
             One float32 array per cloud, a row per point (fewer with
             ``undefined="drop"``); with ``pooling``, one row per cloud.
         """  # noqa: E501
-        out, undefined, offsets = self._compute(X)
+        return self._transform(X)
+
+    def _transform(self, X, clouds=None):
+        out, undefined, offsets = self._compute(X, clouds)
         if self.undefined == "nan":
             out[undefined] = np.nan
         elif self.undefined == "zero":
@@ -582,6 +617,10 @@ class FPFHTransformer(_LocalDescriptor):
 
     def _kernel(self, p, normals, nb):
         n_bins = int(self.n_bins)
-        counts, table = _spfh_counts(p, normals.pop(), nb, n_bins, self.n_jobs)
+        counts, table = _spfh_counts(
+            p, normals.pop(), nb, n_bins, self.n_jobs, pack=True
+        )
+        # the normals are gone: hand their pages back before the output
+        release_free_memory()
         args = (p, counts, table, nb, n_bins, self.convention, self.n_jobs)
         return _fpfh_from_counts(*args)

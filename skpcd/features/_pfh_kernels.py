@@ -359,7 +359,10 @@ def spfh_rows(lo, hi, points, normals, indptr, indices, n_bins, counts):
     """SPFH of points ``lo`` to ``hi`` as pair counts per bin.
 
     ``counts`` (n, 3 * n_bins), blocks ``[f1 | f2 | f3]``, zeroed, of an
-    unsigned type wide enough for the largest neighbourhood. PCL adds
+    unsigned type wide enough for the largest neighbourhood; or, when no
+    point has more than 15 pairs, uint8 of shape (n, (3 * n_bins + 1) // 2)
+    with two 4-bit counts per byte (bin ``b`` in byte ``b // 2``, the odd
+    bins in the high half): half the memory. PCL adds
     ``100 / n_pairs`` once per pair; :func:`spfh_values` turns counts into
     those sums exactly. The point is the first of each pair; neighbours
     with the point's own index are skipped. Pairs run in SIMD lanes as in
@@ -380,12 +383,19 @@ def spfh_rows(lo, hi, points, normals, indptr, indices, n_bins, counts):
     code = np.empty(max(LANES, m_max), dtype=np.int64)
     good = np.empty(max(LANES, m_max), dtype=np.bool_)
     A = np.empty((6, LANES), dtype=np.float32)
-    # each code's three columns, looked up: integer division is slow
+    # each code's three columns (bytes, and what to add there), looked up:
+    # integer division is slow
+    packed = counts.shape[1] < 3 * n_bins
     col = np.empty((n_bins**3, 3), dtype=np.int64)
+    inc = np.ones((n_bins**3, 3), dtype=counts.dtype)
     for c in range(n_bins**3):
         col[c, 0] = c % n_bins
         col[c, 1] = n_bins + (c // n_bins) % n_bins
         col[c, 2] = 2 * n_bins + c // (n_bins * n_bins)
+        if packed:
+            for q in range(3):
+                inc[c, q] = 16 if col[c, q] % 2 else 1
+                col[c, q] //= 2
     i = lo
     while i < hi:
         m = indptr[i + 1] - indptr[i]
@@ -413,9 +423,9 @@ def spfh_rows(lo, hi, points, normals, indptr, indices, n_bins, counts):
                         normals[j, 0], normals[j, 1], normals[j, 2],
                         n_bins,
                     )  # fmt: skip
-                counts[i, col[c, 0]] += 1
-                counts[i, col[c, 1]] += 1
-                counts[i, col[c, 2]] += 1
+                counts[i, col[c, 0]] += inc[c, 0]
+                counts[i, col[c, 1]] += inc[c, 1]
+                counts[i, col[c, 2]] += inc[c, 2]
             i += 1
             continue
         e = _run_end(indptr, i, hi)
@@ -448,9 +458,9 @@ def spfh_rows(lo, hi, points, normals, indptr, indices, n_bins, counts):
                         Q[t, 3, lane], Q[t, 4, lane], Q[t, 5, lane],
                         n_bins,
                     )  # fmt: skip
-                counts[k, col[c, 0]] += 1
-                counts[k, col[c, 1]] += 1
-                counts[k, col[c, 2]] += 1
+                counts[k, col[c, 0]] += inc[c, 0]
+                counts[k, col[c, 1]] += inc[c, 1]
+                counts[k, col[c, 2]] += inc[c, 2]
         i = e
     keep(q_own)
 
@@ -513,6 +523,15 @@ def _sqdist32(points, i, j):
     return (dx * dx + dy * dy) + dz * dz
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _count(counts, j, b, packed):
+    """Bin ``b`` of point ``j``'s pair counts, 4-bit packed or not (see
+    :func:`spfh_rows`). Inlined (arrays)."""
+    if packed:
+        return (np.int64(counts[j, b >> 1]) >> ((b & 1) << 2)) & 15
+    return np.int64(counts[j, b])
+
+
 @njit(cache=True, nogil=True)
 def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out):
     """FPFH of points ``lo`` to ``hi`` into the zeroed rows of ``out``.
@@ -533,6 +552,8 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out)
     out = borrow(out)
     width = 3 * n_bins
     n_table = len(table)
+    # 4-bit counts, two per byte (see spfh_rows), or one count per element
+    packed = counts.shape[1] < width
     for i in range(lo, hi):
         s1 = s2 = s3 = 0.0
         k = 0
@@ -546,9 +567,29 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out)
             if mode == 2:
                 w64 = 1.0 / math.sqrt(np.float64(d))
                 for b in range(width):
-                    out[i, b] += _spfh_value(table, n_pairs, counts[j, b]) * w64
+                    out[i, b] += (
+                        _spfh_value(table, n_pairs, _count(counts, j, b, packed)) * w64
+                    )
                 continue
             weight = np.float32(1.0) / d
+            if n_pairs < n_table and packed:
+                # as below, the counts unpacked on the way
+                for b in range(n_bins):
+                    b2 = n_bins + b
+                    b3 = 2 * n_bins + b
+                    c1 = (counts[j, b >> 1] >> ((b & 1) << 2)) & 15
+                    c2 = (counts[j, b2 >> 1] >> ((b2 & 1) << 2)) & 15
+                    c3 = (counts[j, b3 >> 1] >> ((b3 & 1) << 2)) & 15
+                    v1 = table[n_pairs, c1] * weight
+                    v2 = table[n_pairs, c2] * weight
+                    v3 = table[n_pairs, c3] * weight
+                    s1 += v1
+                    s2 += v2
+                    s3 += v3
+                    out[i, b] += v1
+                    out[i, b2] += v2
+                    out[i, b3] += v3
+                continue
             if n_pairs < n_table:
                 # the three blocks side by side: three independent sums, each
                 # in PCL's order (neighbour by neighbour, bin by bin), and no
@@ -565,9 +606,17 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out)
                     out[i, 2 * n_bins + b] += v3
                 continue
             for b in range(n_bins):
-                v1 = _spfh_value(table, n_pairs, counts[j, b]) * weight
-                v2 = _spfh_value(table, n_pairs, counts[j, n_bins + b]) * weight
-                v3 = _spfh_value(table, n_pairs, counts[j, 2 * n_bins + b]) * weight
+                v1 = _spfh_value(table, n_pairs, _count(counts, j, b, packed)) * weight
+                v2 = (
+                    _spfh_value(table, n_pairs, _count(counts, j, n_bins + b, packed))
+                    * weight
+                )
+                v3 = (
+                    _spfh_value(
+                        table, n_pairs, _count(counts, j, 2 * n_bins + b, packed)
+                    )
+                    * weight
+                )
                 s1 += v1
                 s2 += v2
                 s3 += v3
@@ -579,7 +628,7 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out)
             for b in range(width):
                 if k > 0:
                     out[i, b] /= k
-                out[i, b] += _spfh_value(table, n_own, counts[i, b])
+                out[i, b] += _spfh_value(table, n_own, _count(counts, i, b, packed))
             continue
         k1 = np.float32(100.0 / s1) if s1 != 0.0 else np.float32(s1)
         k2 = np.float32(100.0 / s2) if s2 != 0.0 else np.float32(s2)
@@ -590,7 +639,7 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out)
             out[i, 2 * n_bins + b] *= k3
         if mode == 1:
             for b in range(width):
-                out[i, b] += _spfh_value(table, n_own, counts[i, b])
+                out[i, b] += _spfh_value(table, n_own, _count(counts, i, b, packed))
 
 
 @njit(cache=True, nogil=True)

@@ -283,7 +283,7 @@ def test_simd_kernels_equal_the_scalar_pair_path():
     # neighbourhoods side by side, large ones one point at a time)
     from numba import njit
 
-    from skpcd.features._pfh import _spfh_counts
+    from skpcd.features._pfh import _fpfh_from_counts, _spfh_counts
     from skpcd.features._pfh_kernels import ROW_MIN, _exact_code
 
     @njit
@@ -335,8 +335,23 @@ def test_simd_kernels_equal_the_scalar_pair_path():
             counts = np.zeros((len(pts), 3 * n_bins), np.int64)
             scalar(pts, normals, nb.indptr, nb.indices, n_bins, ref, counts)
             np.testing.assert_array_equal(got, ref)
-            got_counts, _ = _spfh_counts(pts, normals, nb, n_bins, None)
+            got_counts, table = _spfh_counts(pts, normals, nb, n_bins, None)
             np.testing.assert_array_equal(got_counts, counts)
+            # 4-bit counts, two per byte, where no point has more than 15 pairs
+            packed, _ = _spfh_counts(pts, normals, nb, n_bins, None, pack=True)
+            if nb.sizes.max() - 1 > 15:
+                assert packed.shape == counts.shape
+                continue
+            assert packed.shape == (len(pts), (3 * n_bins + 1) // 2)
+            unpacked = np.stack([packed & 15, packed >> 4], axis=2)
+            unpacked = unpacked.reshape(len(pts), -1)[:, : 3 * n_bins]
+            np.testing.assert_array_equal(unpacked, counts)
+            for convention in ("pcl", "open3d", "paper"):
+                args = (table, nb, n_bins, convention, None)
+                np.testing.assert_array_equal(
+                    _fpfh_from_counts(pts, packed, *args),
+                    _fpfh_from_counts(pts, got_counts, *args),
+                )
 
 
 @pytest.mark.parametrize(
