@@ -10,10 +10,13 @@ the peak is reset):
 
 - ``ground``: ``GroundFilter().fit_predict`` on the scene;
 - ``eps``: ``estimate_eps`` on the non-ground points (the distance curve);
-- ``dbscan``: skpcd's grid DBSCAN on them with that eps (``min_samples=5``);
 - ``segment_scene``: the three end to end (plus segment sizes);
-- ``sklearn``: ``sklearn.cluster.DBSCAN(eps, min_samples=5, n_jobs=2)``;
-- ``open3d``: ``PointCloud.cluster_dbscan(eps, min_points=5)``.
+- ``dbscan``: skpcd's grid DBSCAN of the non-ground points with that eps
+  (``min_samples=5``), and with a wider, user-chosen eps (``--wide-eps``,
+  1.2 m: the radius that keeps the DALES objects whole, see the tests);
+- ``sklearn``: ``sklearn.cluster.DBSCAN(eps, min_samples=5, n_jobs=2)``,
+  both eps;
+- ``open3d``: ``PointCloud.cluster_dbscan(eps, min_points=5)``, both eps.
 
 The two references run with a cap on their address space (``--cap-gb``)
 and a timeout; one that fails at some n is not tried at larger n. Their
@@ -203,13 +206,45 @@ def agreement(ours, theirs):
     }
 
 
+def compare(rest, eps, tmp, tag, failed, skip, timeout, cap_gb):
+    """skpcd's DBSCAN and the references on the non-ground points with one eps."""
+    ours = str(Path(tmp) / f"ours_{tag}.npy")
+    out = {"eps": eps}
+    out["dbscan"] = run_stage(
+        {"stage": "dbscan", "input": rest, "output": ours, "eps": eps}
+    )
+    mine = np.load(ours)
+    for ref in ("sklearn", "open3d"):
+        key = (ref, tag.split("_")[0])
+        if ref in skip:
+            out[ref] = {"failed": "skipped"}
+            continue
+        if key in failed:
+            out[ref] = {"failed": "not run: failed at a smaller n"}
+            continue
+        theirs = str(Path(tmp) / f"{ref}_{tag}.npy")
+        spec = {"stage": ref, "input": rest, "output": theirs, "eps": eps}
+        out[ref] = run_stage(spec, timeout=timeout, cap_gb=cap_gb)
+        if "failed" in out[ref]:
+            failed.add(key)
+        else:
+            out[ref].update(agreement(mine, np.load(theirs)))
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--worker", help=argparse.SUPPRESS)
     ap.add_argument(
         "--sizes", default="1,5,10", help="millions of points (default 1,5,10)"
     )
-    ap.add_argument("--timeout", type=float, default=300.0, help="per reference run")
+    ap.add_argument(
+        "--wide-eps",
+        type=float,
+        default=1.2,
+        help="a second, user-chosen eps for the DBSCAN comparison (0: none)",
+    )
+    ap.add_argument("--timeout", type=float, default=240.0, help="per reference run")
     ap.add_argument("--cap-gb", type=float, default=8.0, help="references' memory cap")
     ap.add_argument(
         "--skip", default="", help="comma list of stages to skip (sklearn, open3d)"
@@ -246,33 +281,20 @@ def main(argv=None):
         for n in sizes:
             run = {"n_points": n}
             rest = str(Path(tmp) / f"rest_{n}.npy")
-            ours = str(Path(tmp) / f"ours_{n}.npy")
             run["ground"] = run_stage(
                 {"stage": "ground", "input": paths[n], "output": rest}
             )
             run["n_rest"] = n - run["ground"]["n_ground"]
             run["eps"] = run_stage({"stage": "eps", "input": rest})
-            eps = run["eps"]["eps"]
-            run["dbscan"] = run_stage(
-                {"stage": "dbscan", "input": rest, "output": ours, "eps": eps}
-            )
             run["segment_scene"] = run_stage(
                 {"stage": "segment_scene", "input": paths[n]}
             )
-            mine = np.load(ours)
-            for ref in ("sklearn", "open3d"):
-                if ref in skip or ref in failed:
-                    run[ref] = {"failed": "skipped (failed at a smaller n)"}
-                    if ref in skip:
-                        run[ref] = {"failed": "skipped"}
-                    continue
-                theirs = str(Path(tmp) / f"{ref}_{n}.npy")
-                spec = {"stage": ref, "input": rest, "output": theirs, "eps": eps}
-                run[ref] = run_stage(spec, timeout=a.timeout, cap_gb=a.cap_gb)
-                if "failed" in run[ref]:
-                    failed.add(ref)
-                else:
-                    run[ref].update(agreement(mine, np.load(theirs)))
+            limits = {"failed": failed, "skip": skip, "timeout": a.timeout}
+            limits["cap_gb"] = a.cap_gb
+            eps = run["eps"]["eps"]
+            run["auto"] = compare(rest, eps, tmp, f"auto_{n}", **limits)
+            if a.wide_eps:
+                run["wide"] = compare(rest, a.wide_eps, tmp, f"wide_{n}", **limits)
             R["runs"].append(run)
             print(_row_text(run))
             sys.stdout.flush()
@@ -292,13 +314,19 @@ def _cell(r):
     return f"{r['seconds']:>8.1f} {r['peak_mb']:>9.0f}"
 
 
+STAGES = ("ground", "eps", "segment_scene")
+COMPARED = ("dbscan", "sklearn", "open3d")
+
+
 def _row_text(run):
-    stages = ("ground", "eps", "dbscan", "segment_scene", "sklearn", "open3d")
-    return f"{run['n_points'] / 1e6:>5.1f}M " + " ".join(_cell(run[s]) for s in stages)
+    cells = [_cell(run[s]) for s in STAGES] + [_cell(run["auto"][s]) for s in COMPARED]
+    return f"{run['n_points'] / 1e6:>5.1f}M " + " ".join(cells)
 
 
 def report(R):
     m = R["machine"]
+    head = " ".join(f"{s:>18}" for s in ("ground", "eps curve", "segment_scene"))
+    sub = " ".join(f"{'s':>8} {'MB':>9}" for _ in range(3))
     lines = [
         "Scene segmentation: skpcd vs scikit-learn DBSCAN and Open3D cluster_dbscan",
         f"machine  {m['cpu']}, {m['cores']} cores, load average "
@@ -309,65 +337,71 @@ def report(R):
         f"dbscan   min_samples {R['min_samples']}, n_jobs {R['n_jobs']}; references "
         f"capped at {R['cap_gb']:.0f} GB of address space, {R['timeout_s']:.0f} s",
         "",
-        "time (s) and peak memory above the loaded input (MB), one fresh process "
-        "per stage",
-        f"{'n':>6} {'non-ground':>10} {'eps':>6} "
-        + " ".join(
-            f"{s:>18}"
-            for s in (
-                "ground",
-                "eps curve",
-                "dbscan",
-                "segment_scene",
-                "sklearn",
-                "open3d",
-            )
-        ),
-        f"{'':>24} " + " ".join(f"{'s':>8} {'MB':>9}" for _ in range(6)),
+        "Stages of segment_scene: time (s) and peak memory above the loaded input "
+        "(MB), one fresh process per stage",
+        f"{'n':>6} {'non-ground':>10} " + head,
+        f"{'':>17} " + sub,
     ]
     for run in R["runs"]:
         lines.append(
             f"{run['n_points'] / 1e6:>5.1f}M {run['n_rest']:>10} "
-            f"{run['eps'].get('eps', float('nan')):>6.3f} "
-            + " ".join(
-                _cell(run[s])
-                for s in (
-                    "ground",
-                    "eps",
-                    "dbscan",
-                    "segment_scene",
-                    "sklearn",
-                    "open3d",
-                )
-            )
+            + " ".join(_cell(run[s]) for s in STAGES)
         )
+    head = " ".join(f"{s:>18}" for s in ("skpcd dbscan", "sklearn DBSCAN", "open3d"))
+    for which, title in (("auto", "the estimated eps"), ("wide", "a wider eps")):
+        if which not in R["runs"][0]:
+            continue
+        lines += [
+            "",
+            f"DBSCAN of the non-ground points with {title}: time (s), peak memory (MB)",
+            f"{'n':>6} {'non-ground':>10} {'eps':>6} " + head,
+            f"{'':>24} " + sub,
+        ]
+        for run in R["runs"]:
+            c = run[which]
+            lines.append(
+                f"{run['n_points'] / 1e6:>5.1f}M {run['n_rest']:>10} {c['eps']:>6.3f} "
+                + " ".join(_cell(c[s]) for s in COMPARED)
+            )
     lines += ["", "references: outcome and agreement with skpcd's labels"]
-    for run in R["runs"]:
-        for ref in ("sklearn", "open3d"):
-            r = run[ref]
-            if "failed" in r:
-                what = r["failed"]
-            else:
-                what = (
-                    f"{r['n_clusters']} clusters "
-                    f"(skpcd {run['dbscan']['n_clusters']}); "
-                    f"ARI {r['ari']:.4f}, same noise status {r['same_noise']:.4f}; "
-                    f"{r['seconds'] / run['dbscan']['seconds']:.1f}x skpcd's time, "
-                    f"{r['peak_mb'] / max(run['dbscan']['peak_mb'], 1):.1f}x its memory"
+    for which in ("auto", "wide"):
+        for run in R["runs"]:
+            if which not in run:
+                continue
+            c = run[which]
+            for ref in ("sklearn", "open3d"):
+                r = c[ref]
+                if "failed" in r:
+                    what = r["failed"]
+                else:
+                    ours = c["dbscan"]
+                    what = (
+                        f"{r['n_clusters']} clusters (skpcd {ours['n_clusters']}); "
+                        f"ARI {r['ari']:.4f}, same noise status {r['same_noise']:.4f}; "
+                        f"{r['seconds'] / ours['seconds']:.1f}x skpcd's time, "
+                        f"{r['peak_mb'] / max(ours['peak_mb'], 1):.1f}x its memory"
+                    )
+                lines.append(
+                    f"{run['n_points'] / 1e6:>5.1f}M eps {c['eps']:.3f} {ref:<8} {what}"
                 )
-            lines.append(f"{run['n_points'] / 1e6:>5.1f}M {ref:<8} {what}")
     lines += ["", "growth with n (time and memory relative to the smallest n)"]
     first = R["runs"][0]
     for run in R["runs"][1:]:
         f = run["n_points"] / first["n_points"]
         parts = []
-        for s in ("ground", "eps", "dbscan", "segment_scene"):
-            a, b = first[s], run[s]
-            if "failed" in a or "failed" in b:
+        pairs = [(s, first[s], run[s]) for s in STAGES]
+        pairs += [
+            (f"{s} ({w})", first[w][s], run[w][s])
+            for w in ("auto", "wide")
+            if w in run
+            for s in COMPARED
+        ]
+        for name, x, y in pairs:
+            if "failed" in x or "failed" in y:
                 continue
             parts.append(
-                f"{s} x{b['seconds'] / a['seconds']:.1f} time, "
-                f"x{b['peak_mb'] / max(a['peak_mb'], 1):.1f} memory"
+                f"{name} x{y['seconds'] / x['seconds']:.1f} time, "
+                f"x{y['peak_mb'] / max(x['peak_mb'], 1):.1f} memory"
             )
         lines.append(f"n x{f:.0f}: " + "; ".join(parts))
     return "\n".join(lines) + "\n"

@@ -216,8 +216,8 @@ class AutoEpsDBSCAN(ClusterMixin, BaseEstimator):
     >>> plane = np.column_stack([rng.random((2000, 2)) * 4, np.zeros(2000)])
     >>> scene = np.vstack([plane, plane + [6, 0, 0], [[3, 9, 9]]])
     >>> db = AutoEpsDBSCAN(random_state=0).fit(scene)
-    >>> db.n_clusters_, db.labels_[-1]
-    (2, np.int64(-1))
+    >>> db.n_clusters_, int(db.labels_[-1])
+    (2, -1)
     >>> 0.05 < db.eps_ < 0.5
     True
     """
