@@ -173,7 +173,7 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
 
     Attributes
     ----------
-    vocabulary_ : ndarray of shape (n_words, n_features_in_)
+    vocabulary_ : ndarray of shape (n_words, ``n_features_in_``)
         The words: the cluster centres learned by ``clusterer_``.
     clusterer_ : estimator
         The fitted clone of ``clusterer``.
