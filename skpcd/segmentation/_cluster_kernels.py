@@ -37,7 +37,8 @@ def union_core(
 
     ``xs`` holds the points in sorted order and ``core`` their core flags
     (sorted order too). A pair is tested from its lower position only.
-    Serial: the forest is shared.
+    Threads each need a forest of their own (:func:`merge_forest` joins
+    them): the links of a cell may reach any other cell's points.
     """
     xs = borrow(xs)
     core = borrow(core)
@@ -75,6 +76,19 @@ def union_core(
                         elif b < a:
                             parent[a] = b
     keep(i_own)
+
+
+@njit(cache=True, nogil=True)
+def merge_forest(parent, other):
+    """Add the links of the forest ``other`` to ``parent`` (lower root kept)."""
+    for t in range(len(other)):
+        if other[t] != t:
+            a = _find(parent, t)
+            b = _find(parent, _find(other, t))
+            if a < b:
+                parent[b] = a
+            elif b < a:
+                parent[a] = b
 
 
 @njit(cache=True, nogil=True)

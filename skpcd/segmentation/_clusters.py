@@ -14,6 +14,7 @@ components of the graph of points closer than a distance: DBSCAN with
 """
 
 import typing
+from concurrent.futures import ThreadPoolExecutor
 from numbers import Integral, Real
 
 import numpy as np
@@ -21,9 +22,12 @@ from sklearn.base import BaseEstimator, ClusterMixin, _fit_context
 from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import validate_data
 
-from skpcd.utils._parallel import parallel_rows
+from skpcd.utils._parallel import effective_threads, parallel_rows
 
 __all__ = ["EuclideanClusters", "euclidean_clusters", "grid_dbscan"]
+
+# Fewer points than this per thread: the union-find runs in one thread.
+_MIN_UNION_POINTS = 50_000
 
 
 def refuse_sequence(X):
@@ -69,6 +73,36 @@ def _radius_grid(xyz, eps):
     origin, h, dims = _grid_shape(xyz, cloud_ptr, np.array([float(eps)]))
     order, cells = _build_grid(xyz, cloud_ptr, origin, h, dims)
     return xyz[order], order, cells, dims
+
+
+def _union(xs, core, cells, cell_args, r2, n_jobs):
+    """The union-find forest of the core points within ``sqrt(r2)``: each
+    thread links the core points of a share of the cells (by point count)
+    in a forest of its own, and the forests are merged. Roots are the lowest
+    positions of their components, whatever the threads."""
+    from skpcd.segmentation import _cluster_kernels as k
+
+    n, n_cells = len(xs), len(cells[1])
+    dtype = np.int32 if n < 2**31 - 1 else np.int64
+    n_threads = min(effective_threads(n_jobs), max(1, n // _MIN_UNION_POINTS))
+    cell_start = cells[2]
+    bounds = np.searchsorted(cell_start, np.linspace(0, n, n_threads + 1)[1:-1])
+    bounds = [0, *bounds.tolist(), n_cells]
+    forests = [np.arange(n, dtype=dtype) for _ in range(n_threads)]
+    args = (xs, core, *cell_args, r2)
+    if n_threads == 1:
+        k.union_core(0, n_cells, *args, forests[0])
+        return forests[0]
+    with ThreadPoolExecutor(n_threads) as pool:
+        jobs = [
+            pool.submit(k.union_core, bounds[i], bounds[i + 1], *args, forests[i])
+            for i in range(n_threads)
+        ]
+        for job in jobs:
+            job.result()
+    for other in forests[1:]:
+        k.merge_forest(forests[0], other)
+    return forests[0]
 
 
 def grid_dbscan(xyz, eps, min_samples, *, n_jobs=None):
@@ -124,8 +158,7 @@ def grid_dbscan(xyz, eps, min_samples, *, n_jobs=None):
         )  # fmt: skip
         core_sorted = counts[order] >= min_samples
         del counts
-    parent = np.arange(n, dtype=np.int64)
-    k.union_core(0, n_cells, xs, core_sorted, *cell_args, r2, parent)
+    parent = _union(xs, core_sorted, cells, cell_args, r2, n_jobs)
     nearest = np.full(n, -1, dtype=np.int64)
     if not core_sorted.all():
         parallel_rows(

@@ -140,13 +140,24 @@ def test_partition_invariant_to_translation_and_order(seed, shift):
     )
 
 
-def test_n_jobs_and_read_only_input():
+def test_n_jobs_and_read_only_input(monkeypatch):
+    from skpcd.segmentation import _clusters
+
+    # split the union-find among threads even on this small cloud
+    monkeypatch.setattr(_clusters, "_MIN_UNION_POINTS", 1000)
     xyz = _blobs(20_000, seed=5)
     one = AutoEpsDBSCAN(eps=0.3, n_jobs=1).fit(xyz).labels_
     frozen = xyz.copy()
     frozen.flags.writeable = False
     two = AutoEpsDBSCAN(eps=0.3, n_jobs=2).fit(frozen).labels_
     np.testing.assert_array_equal(one, two)
+    many = AutoEpsDBSCAN(eps=0.3, n_jobs=5).fit(xyz).labels_
+    np.testing.assert_array_equal(one, many)
+    ec = EuclideanClusters(eps=0.3, min_cluster_size=1)
+    np.testing.assert_array_equal(
+        ec.set_params(n_jobs=1).fit(xyz).labels_,
+        ec.set_params(n_jobs=3).fit(xyz).labels_,
+    )
 
 
 def test_fewer_columns_are_padded_and_extra_columns_ignored():
