@@ -393,9 +393,12 @@ def _cmd_segment(args):
     for i, idx in enumerate(_segment_members(result.labels, n)):
         seg = points[idx]
         fields = {name: values[idx] for name, values in extras.items()}
-        write_point_cloud(
-            out / names[i], seg, fields=fields or None, overwrite=args.overwrite
-        )
+        try:
+            write_point_cloud(
+                out / names[i], seg, fields=fields or None, overwrite=args.overwrite
+            )
+        except ValueError as exc:  # a field the format cannot hold
+            raise SystemExit(f"skpcd segment: {exc}") from exc
         lo, hi = seg.min(axis=0), seg.max(axis=0)
         rows.append([names[i], i, len(idx), *lo, *hi, *(hi - lo)])
     tmp = summary.with_name(f".{summary.name}.tmp")
@@ -452,7 +455,10 @@ def _cmd_identify(args):
         score = np.full(len(points), np.nan, dtype=np.float32)
         score[inside] = segment_score[labels[inside]]
         fields[kind] = score
-    write_point_cloud(out, points, fields=fields, overwrite=args.overwrite)
+    try:
+        write_point_cloud(out, points, fields=fields, overwrite=args.overwrite)
+    except ValueError as exc:  # a field the format cannot hold
+        raise SystemExit(f"skpcd identify: {exc}") from exc
     tmp = legend.with_name(f".{legend.name}.tmp")
     with open(tmp, "w", newline="") as f:
         writer = csv.writer(f)
