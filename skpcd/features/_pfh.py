@@ -90,11 +90,33 @@ def compute_pfh(
 
 def _pfh_packed(p, n, nb, n_bins, n_jobs):
     """PFH kernel over float32 packed arrays."""
-    from skpcd.features._pfh_kernels import pfh_rows
+    from skpcd.features._pfh_kernels import ROW_MIN, pfh_rows, pfh_rows_reuse
 
     out = np.zeros((len(p), n_bins**3), dtype=np.float32)
-    parallel_rows(pfh_rows, len(p), n_jobs, p, n, nb.indptr, nb.indices, n_bins, out)
+    args = (p, n, nb.indptr, nb.indices, n_bins, out)
+    if len(p) and len(nb.indices) >= ROW_MIN * len(p) and n_bins**3 < 2**15:
+        # large neighbourhoods: visited in space order, consecutive ones
+        # share most of their pairs (pfh_rows_reuse)
+        rows = _space_order(p, nb)
+        parallel_rows(pfh_rows_reuse, len(p), n_jobs, rows, *args, min_chunk=256)
+    else:
+        parallel_rows(pfh_rows, len(p), n_jobs, *args)
     return out
+
+
+def _space_order(p, nb):
+    """The points in a snake order over cells a quarter of the neighbourhood
+    size wide: x, then y up and down, then z."""
+    sizes = nb.sizes
+    # the neighbourhood radius, from the farthest neighbour of a few points
+    probe = np.flatnonzero(sizes > 1)[:: max(1, len(p) // 1000)]
+    last = p[nb.indices[nb.indptr[probe + 1] - 1]] - p[probe]
+    h = 0.25 * float(np.median(np.sqrt((last.astype(np.float64) ** 2).sum(1))))
+    if not h > 0:
+        return np.arange(len(p))
+    c = np.floor((p - p.min(axis=0)) / np.float32(h)).astype(np.int64)
+    snake = np.where(c[:, 0] % 2 == 0, c[:, 1], -c[:, 1])
+    return np.lexsort((c[:, 2], snake, c[:, 0]))
 
 
 # Pair counts up to this many are turned into PCL's sums by table lookup.

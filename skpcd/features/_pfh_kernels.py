@@ -718,3 +718,160 @@ def improved_rows(lo, hi, seg_ptr, xyz, points, normals, middle, n_bins, mode, o
                     out[s, b1] += 0.5
                     out[s, n_bins + b2] += 0.5
                     out[s, 2 * n_bins + b3] += 0.5
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _symmetric(pax, pay, paz, nax, nay, naz, pbx, pby, pbz, nbx, nby, nbz):
+    """Whether a pair's features do not depend on which point comes first.
+
+    With (a, b) swapped, d changes sign exactly, so |a1| and |a2| trade
+    places exactly; when they differ by more than ``_SWAP_MARGIN`` both
+    orders pick the same source point and compute the same float32 values.
+    Ties, near-ties, zero distances and NaN return False. Inlined."""
+    dx = pbx - pax
+    dy = pby - pay
+    dz = pbz - paz
+    f4 = np.float32(math.sqrt(_dot(dx, dy, dz, dx, dy, dz)))
+    b1 = abs(_dot(nax, nay, naz, dx, dy, dz) / f4)
+    b2 = abs(_dot(nbx, nby, nbz, dx, dy, dz) / f4)
+    return (f4 > F0) & ((b1 + _SWAP_MARGIN < b2) | (b2 + _SWAP_MARGIN < b1))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _ordered_code(points, normals, indices, start, perm, u, v, n_bins):
+    """:func:`_exact_code` of the pair at positions ``u`` and ``v`` of
+    :func:`pfh_rows_reuse`'s order, the entry later in the neighbourhood
+    first, as PCL. Inlined (arrays)."""
+    a, b = perm[u], perm[v]
+    if a < b:
+        a, b = b, a
+    ja = indices[start + a]
+    jb = indices[start + b]
+    return _exact_code(
+        points[ja, 0], points[ja, 1], points[ja, 2],
+        normals[ja, 0], normals[ja, 1], normals[ja, 2],
+        points[jb, 0], points[jb, 1], points[jb, 2],
+        normals[jb, 0], normals[jb, 1], normals[jb, 2],
+        n_bins,
+    )  # fmt: skip
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def pfh_rows_reuse(lo, hi, rows, points, normals, indptr, indices, n_bins, out):
+    """PFH of the points ``rows[lo:hi]``, reusing pair codes between queries.
+
+    The same as :func:`pfh_rows` (every row bit-identical), for large
+    neighbourhoods (radius searches) visited in a spatially coherent order
+    (``rows``): consecutive neighbourhoods share most of their points, and a
+    pair (a, b) gets the same bin in every neighbourhood that holds both,
+    unless its bin depends on which point comes first (:func:`_symmetric`
+    is False; PCL takes the point farther from the query first). The codes
+    of a neighbourhood's pairs are kept in a matrix; the next neighbourhood
+    looks up its pairs of points already seen there and computes only the
+    pairs with a new point (in SIMD lanes, as :func:`pfh_rows`) and the
+    order-dependent ones (with the scalar path, in PCL's order).
+    """
+    if hi <= lo:
+        return
+    rows = borrow(rows)
+    points = borrow(points)
+    normals = borrow(normals)
+    indptr = borrow(indptr)
+    indices = borrow(indices)
+    out = borrow(out)
+    nb = np.float64(n_bins)
+    margin = nb * D_PI * 1e-4
+    m_max = 1
+    for r in range(lo, hi):
+        i = rows[r]
+        m_max = max(m_max, indptr[i + 1] - indptr[i])
+    pos_own = np.full(len(points), -1, dtype=np.int32)
+    pos = borrow(pos_own)
+    c_own = np.empty((2, m_max, m_max), dtype=np.int16)
+    i_own = np.empty((5, m_max), dtype=np.int64)
+    prev_pts = borrow(i_own[0])  # the previous neighbourhood's points
+    perm = borrow(i_own[1])  # new order: position u holds entry perm[u]
+    old = borrow(i_own[2])  # entry u's position in the previous matrix
+    code = borrow(i_own[3])
+    good_own = np.empty(m_max, dtype=np.bool_)
+    good = borrow(good_own)
+    p_own = np.empty((6, m_max), dtype=np.float32)
+    P = borrow(p_own)
+    n_prev = 0
+    cur = 0
+    for r in range(lo, hi):
+        i = rows[r]
+        start = indptr[i]
+        m = indptr[i + 1] - start
+        if m < 2:
+            continue
+        incr = F100 / np.float32((m * (m - 1)) // 2)
+        Cp = borrow(c_own[1 - cur])
+        Cc = borrow(c_own[cur])
+        # points seen in the previous neighbourhood first, then the new ones
+        n_old = 0
+        for t in range(m):
+            if pos[indices[start + t]] >= 0:
+                perm[n_old] = t
+                n_old += 1
+        u = n_old
+        for t in range(m):
+            if pos[indices[start + t]] < 0:
+                perm[u] = t
+                u += 1
+        for u in range(m):
+            j = indices[start + perm[u]]
+            old[u] = pos[j]
+            for d in range(3):
+                P[d, u] = points[j, d]
+                P[3 + d, u] = normals[j, d]
+        # pairs of two old points: the previous matrix, where usable
+        for u in range(1, n_old):
+            ou = old[u]
+            for v in range(u):
+                ov = old[v]
+                c = Cp[max(ou, ov), min(ou, ov)]
+                Cc[u, v] = c
+                if c < 0:
+                    c = _ordered_code(
+                        points, normals, indices, start, perm, u, v, n_bins
+                    )
+                out[i, c] += incr
+        # pairs with a new point: in SIMD lanes
+        for u in range(max(n_old, 1), m):
+            pax, pay, paz = P[0, u], P[1, u], P[2, u]
+            nax, nay, naz = P[3, u], P[4, u], P[5, u]
+            for v in range(u):
+                code[v], good[v] = _fast_code(
+                    pax, pay, paz, nax, nay, naz,
+                    P[0, v], P[1, v], P[2, v], P[3, v], P[4, v], P[5, v],
+                    nb, margin,
+                )  # fmt: skip
+                good[v] &= _symmetric(
+                    pax, pay, paz, nax, nay, naz,
+                    P[0, v], P[1, v], P[2, v], P[3, v], P[4, v], P[5, v],
+                )  # fmt: skip
+            for v in range(u):
+                if good[v]:
+                    c = code[v]
+                    Cc[u, v] = c
+                else:
+                    Cc[u, v] = -1
+                    c = _ordered_code(
+                        points, normals, indices, start, perm, u, v, n_bins
+                    )
+                out[i, c] += incr
+        # this neighbourhood's positions, for the next one
+        for t in range(n_prev):
+            pos[prev_pts[t]] = -1
+        for u in range(m):
+            j = indices[start + perm[u]]
+            pos[j] = u
+            prev_pts[u] = j
+        n_prev = m
+        cur = 1 - cur
+    keep(pos_own)
+    keep(c_own)
+    keep(i_own)
+    keep(good_own)
+    keep(p_own)

@@ -36,7 +36,7 @@ def effective_threads(n_jobs):
     return max(1, int(effective_n_jobs(n_jobs)))
 
 
-def parallel_rows(kernel, n_rows, n_jobs, *args):
+def parallel_rows(kernel, n_rows, n_jobs, *args, min_chunk=_MIN_CHUNK):
     """Run ``kernel(lo, hi, *args)`` over ``range(n_rows)`` in chunks.
 
     Parameters
@@ -51,17 +51,20 @@ def parallel_rows(kernel, n_rows, n_jobs, *args):
         Threads, as in scikit-learn.
     *args
         Passed to the kernel.
+    min_chunk : int, default=4096
+        Fewest rows per chunk (lower for expensive rows).
     """
     n_threads = effective_threads(n_jobs)
-    if n_threads == 1 or n_rows <= _MIN_CHUNK:
+    if n_threads == 1 or n_rows <= min_chunk:
         kernel(0, n_rows, *args)
         return
-    size = max(_MIN_CHUNK, -(-n_rows // (n_threads * _CHUNKS_PER_THREAD)))
+    size = max(min_chunk, -(-n_rows // (n_threads * _CHUNKS_PER_THREAD)))
     bounds = [(lo, min(n_rows, lo + size)) for lo in range(0, n_rows, size)]
-    # compile (or load) the kernel once, before the threads race to do it
-    kernel(*bounds[0], *args)
+    # compile (or load) the kernel once, before the threads race to do it:
+    # an empty range, so that no chunk runs alone
+    kernel(0, 0, *args)
     with ThreadPoolExecutor(n_threads) as pool:
-        for future in [pool.submit(kernel, lo, hi, *args) for lo, hi in bounds[1:]]:
+        for future in [pool.submit(kernel, lo, hi, *args) for lo, hi in bounds]:
             future.result()
 
 

@@ -283,8 +283,8 @@ def test_simd_kernels_equal_the_scalar_pair_path():
     # neighbourhoods side by side, large ones one point at a time)
     from numba import njit
 
-    from skpcd.features._pfh import _fpfh_from_counts, _spfh_counts
-    from skpcd.features._pfh_kernels import ROW_MIN, _exact_code
+    from skpcd.features._pfh import _fpfh_from_counts, _space_order, _spfh_counts
+    from skpcd.features._pfh_kernels import ROW_MIN, _exact_code, pfh_rows_reuse
 
     @njit
     def scalar(p, n, indptr, indices, n_bins, pfh, spfh):
@@ -318,9 +318,13 @@ def test_simd_kernels_equal_the_scalar_pair_path():
     plane = np.c_[rng.uniform(0, 2, (300, 2)), np.zeros(300)]
     sphere = rng.normal(size=(300, 3))
     sphere /= np.linalg.norm(sphere, axis=1, keepdims=True)
-    pts = np.vstack([plane, sphere, plane[:40]]).astype(F)  # 40 duplicates
+    # a line whose pairs all tie (|a1| == |a2|, different normals): their bins
+    # depend on which point comes first in each neighbourhood
+    line = np.c_[3 + 0.05 * np.arange(20), np.zeros((20, 2))]
+    tied = np.tile([[0.6, 0, 0.8], [0.6, 0.8, 0]], (10, 1))
+    pts = np.vstack([plane, sphere, plane[:40], line]).astype(F)  # 40 duplicates
     up = np.tile([0, 0, 1], (300, 1))
-    normals = np.vstack([up, sphere, up[:40]]).astype(F)
+    normals = np.vstack([up, sphere, up[:40], tied]).astype(F)
     normals[5] = np.nan
     normals[7] = [0, 0, -1]  # antiparallel: |a1| == |a2| ties
     # k nearest of varying sizes, and radii with 24+ neighbours
@@ -335,6 +339,14 @@ def test_simd_kernels_equal_the_scalar_pair_path():
             counts = np.zeros((len(pts), 3 * n_bins), np.int64)
             scalar(pts, normals, nb.indptr, nb.indices, n_bins, ref, counts)
             np.testing.assert_array_equal(got, ref)
+            # pair codes reused between neighbourhoods, in any visiting order
+            orders = [np.arange(len(pts)), rng.permutation(len(pts))]
+            orders.append(_space_order(pts, nb))
+            for rows in orders:
+                reused = np.zeros_like(got)
+                args = (pts, normals, nb.indptr, nb.indices, n_bins, reused)
+                pfh_rows_reuse(0, len(pts), rows, *args)
+                np.testing.assert_array_equal(reused, ref)
             got_counts, table = _spfh_counts(pts, normals, nb, n_bins, None)
             np.testing.assert_array_equal(got_counts, counts)
             # 4-bit counts, two per byte, where no point has more than 15 pairs
