@@ -129,3 +129,11 @@ def test_single_point_and_flat_line():
     assert GroundFilter().fit_predict([[1.0, 2.0, 3.0]]).tolist() == [True]
     line = np.column_stack([np.linspace(0, 10, 50), np.zeros(50), np.zeros(50)])
     assert GroundFilter().fit_predict(line).all()
+
+
+def test_point_order_invariance():
+    ground, objects = _scene(3)
+    X = np.vstack([ground, objects])
+    perm = np.random.default_rng(0).permutation(len(X))
+    gf = GroundFilter().fit(X)
+    np.testing.assert_array_equal(GroundFilter().fit_predict(X[perm]), gf.ground_[perm])

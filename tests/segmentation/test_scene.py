@@ -205,3 +205,17 @@ def test_make_scene_layout(objects):
     assert height[truth >= 0].min() == pytest.approx(0.0, abs=1e-9)
     with pytest.raises(ValueError, match="empty"):
         make_scene([])
+
+
+def test_point_order_invariance(scenes):
+    points, _ = scenes["aerial"]
+    perm = np.random.default_rng(0).permutation(len(points))
+    # all points in the eps curve (no sampling): the same eps and segments
+    kwargs = {"min_cluster_size": 30}
+    seg = segment_scene(points, **kwargs)
+    shuffled = segment_scene(points[perm], **kwargs)
+    assert len(points) <= 100_000  # AutoEpsDBSCAN's max_samples
+    assert shuffled.eps == pytest.approx(seg.eps, rel=1e-9)
+    np.testing.assert_array_equal(shuffled.ground, seg.ground[perm])
+    # a border point tied between two clusters may go either way
+    assert adjusted_rand_score(seg.labels[perm], shuffled.labels) > 0.999
