@@ -59,6 +59,8 @@ def check_scene(X, estimator=None, *, min_points=1, reset=True):
     else:
         X = validate_data(estimator, X, reset=reset, **kwargs)
     n, d = X.shape
+    if d == 3:
+        return np.ascontiguousarray(X)  # no copy when it already is
     xyz = np.zeros((n, 3))
     xyz[:, : min(d, 3)] = X[:, :3]
     return xyz
