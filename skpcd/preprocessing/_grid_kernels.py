@@ -473,3 +473,60 @@ def ball_cells(
             _write_row(indices, sqdist, indptr[i], i, bi, bd, m)
     keep(f_own)
     keep(i_own)
+
+
+@njit(cache=True, nogil=True)
+def radix_argsort(keys):
+    """Stable argsort of non-negative int64 ``keys``, and the sorted keys.
+
+    Least significant digit first, 11 bits a pass, only as many passes as
+    the largest key needs (digits that every key shares are skipped):
+    several times faster than ``np.argsort`` on the cell keys of a cloud.
+    """
+    n = len(keys)
+    order = np.arange(n)
+    out = keys.copy()
+    if n < 2:
+        return order, out
+    top = out.max()
+    k2 = np.empty(n, dtype=np.int64)
+    o2 = np.empty(n, dtype=np.int64)
+    count = np.empty(2049, dtype=np.int64)
+    shift = 0
+    while shift < 63 and (top >> shift) > 0:
+        count[:] = 0
+        for t in range(n):
+            count[((out[t] >> shift) & 2047) + 1] += 1
+        if count.max() < n:
+            for b in range(2048):
+                count[b + 1] += count[b]
+            for t in range(n):
+                d = (out[t] >> shift) & 2047
+                p = count[d]
+                count[d] = p + 1
+                k2[p] = out[t]
+                o2[p] = order[t]
+            out, k2 = k2, out
+            order, o2 = o2, order
+        shift += 11
+    return order, out
+
+
+@njit(cache=True, nogil=True)
+def gather_rows(xyz, order):
+    """``xyz[order]`` for an (n, 3) array."""
+    xs = np.empty((len(order), 3), dtype=xyz.dtype)
+    for t in range(len(order)):
+        j = order[t]
+        xs[t, 0] = xyz[j, 0]
+        xs[t, 1] = xyz[j, 1]
+        xs[t, 2] = xyz[j, 2]
+    return xs
+
+
+@njit(cache=True, nogil=True)
+def shift_keys(keys, cloud_ptr, base, sign):
+    """Add ``sign * base[c]`` to the keys of cloud ``c``, in place."""
+    for c in range(len(cloud_ptr) - 1):
+        for i in range(cloud_ptr[c], cloud_ptr[c + 1]):
+            keys[i] += sign * base[c]
