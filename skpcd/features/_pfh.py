@@ -6,6 +6,7 @@ clouds, search neighbourhoods once, estimate normals and run one parallel
 kernel over all points of all clouds.
 """
 
+import itertools
 import typing
 from numbers import Integral, Real
 
@@ -20,7 +21,11 @@ from skpcd.preprocessing._normals import (
     pack_neighborhoods,
 )
 from skpcd.utils import check_point_clouds
-from skpcd.utils._parallel import parallel_rows, release_free_memory
+from skpcd.utils._parallel import (
+    effective_threads,
+    parallel_rows,
+    release_free_memory,
+)
 
 __all__ = ["FPFHTransformer", "PFHTransformer", "compute_fpfh", "compute_pfh"]
 
@@ -90,33 +95,161 @@ def compute_pfh(
 
 def _pfh_packed(p, n, nb, n_bins, n_jobs):
     """PFH kernel over float32 packed arrays."""
-    from skpcd.features._pfh_kernels import ROW_MIN, pfh_rows, pfh_rows_reuse
+    from skpcd.features._pfh_kernels import ROW_MIN, pfh_rows
 
     out = np.zeros((len(p), n_bins**3), dtype=np.float32)
     args = (p, n, nb.indptr, nb.indices, n_bins, out)
     if len(p) and len(nb.indices) >= ROW_MIN * len(p) and n_bins**3 < 2**15:
         # large neighbourhoods: visited in space order, consecutive ones
         # share most of their pairs (pfh_rows_reuse)
-        rows = _space_order(p, nb)
-        parallel_rows(pfh_rows_reuse, len(p), n_jobs, rows, *args, min_chunk=256)
+        rows = _space_order(p, _radius_of(p, nb))
+        _pfh_reuse(rows, np.empty(0, np.int64), *args, n_jobs, _pos_pool(p, n_jobs))
     else:
         parallel_rows(pfh_rows, len(p), n_jobs, *args)
     return out
 
 
-def _space_order(p, nb):
-    """The points in a snake order over cells a quarter of the neighbourhood
-    size wide: x, then y up and down, then z."""
-    sizes = nb.sizes
-    # the neighbourhood radius, from the farthest neighbour of a few points
-    probe = np.flatnonzero(sizes > 1)[:: max(1, len(p) // 1000)]
+def _pos_pool(p, n_jobs):
+    """The scratch of :func:`~skpcd.features._pfh_kernels.pfh_rows_reuse`,
+    one per thread."""
+    from queue import SimpleQueue
+
+    pool = SimpleQueue()
+    for _ in range(effective_threads(n_jobs)):
+        pool.put(np.full(len(p), -1, dtype=np.int32))
+    return pool
+
+
+def _pfh_reuse(rows, point_of, p, n, indptr, indices, n_bins, out, n_jobs, pool):
+    """PFH of the CSR rows ``rows`` (in that order) with pair codes reused."""
+    from skpcd.features._pfh_kernels import pfh_rows_reuse
+
+    def run(lo, hi, *args):
+        pos = pool.get()
+        try:
+            pfh_rows_reuse(lo, hi, rows, point_of, pos, *args)
+        finally:
+            pool.put(pos)
+
+    args = (p, n, indptr, indices, n_bins, out)
+    parallel_rows(run, len(rows), n_jobs, *args, min_chunk=256)
+
+
+def _radius_of(p, nb):
+    """The neighbourhood radius, from the farthest neighbour of a few points."""
+    probe = np.flatnonzero(nb.sizes > 1)[:: max(1, len(p) // 1000)]
     last = p[nb.indices[nb.indptr[probe + 1] - 1]] - p[probe]
-    h = 0.25 * float(np.median(np.sqrt((last.astype(np.float64) ** 2).sum(1))))
-    if not h > 0:
+    return float(np.median(np.sqrt((last.astype(np.float64) ** 2).sum(1))))
+
+
+def _space_order(p, radius):
+    """The points in a snake order over cells a quarter of ``radius`` wide:
+    x, then y up and down, then z."""
+    h = 0.25 * radius
+    if not h > 0 or len(p) == 0:
         return np.arange(len(p))
     c = np.floor((p - p.min(axis=0)) / np.float32(h)).astype(np.int64)
     snake = np.where(c[:, 0] % 2 == 0, c[:, 1], -c[:, 1])
     return np.lexsort((c[:, 2], snake, c[:, 0]))
+
+
+# Points per block of the blocked radius PFH (at least; 1/64 of the input
+# on large inputs): the neighbourhoods of one block at a time are held in
+# memory, not those of the whole input.
+_BLOCK = 2048
+
+
+def _pfh_radius_blocked(clouds, radius, n_bins, normals_from, viewpoint, n_jobs):
+    """PFH with a radius search, neighbourhoods block by block.
+
+    Memory stays that of the output, the points and their normals: the
+    neighbourhoods of a block of grid cells are searched, used and freed.
+    A first pass counts the neighbours of every point (and estimates its
+    normal from the sorted ball, storing nothing else); a second stores a
+    block's neighbourhoods and bins their pairs. The same two passes over
+    the grid as one search of all neighbourhoods. Returns ``out,
+    undefined, offsets`` as :meth:`_LocalDescriptor._compute`.
+    """
+    from skpcd.features._pfh_kernels import ROW_MIN
+    from skpcd.preprocessing import _grid_kernels as g
+    from skpcd.preprocessing._neighbors import _build_grid, _grid_shape
+
+    offsets = np.zeros(len(clouds) + 1, dtype=np.int64)
+    np.cumsum([len(c) for c in clouds], out=offsets[1:])
+    xyz = np.ascontiguousarray(np.vstack([c[:, :3] for c in clouds]), dtype=np.float64)
+    n_pts = len(xyz)
+    origin, h, dims = _grid_shape(xyz, offsets, np.full(len(clouds), radius))
+    order, cells = _build_grid(xyz, offsets, origin, h, dims)
+    xs = g.gather_rows(xyz, order)
+    p = xyz.astype(np.float32)
+    del xyz
+    cell_start = cells[2]
+    search = (xs, order, *cells, dims, float(radius) ** 2)
+    step = max(_BLOCK, n_pts // 64)
+    bounds = np.unique(np.searchsorted(cell_start, np.arange(0, n_pts, step)))
+    bounds = np.append(bounds[bounds < len(cell_start) - 1], len(cell_start) - 1)
+    none, none_i = np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int32)
+    f32 = np.empty((0, 3), dtype=np.float32)
+    no_normals = (f32, np.empty(0, dtype=np.float32), f32, f32[:, 0])
+    few = {"min_chunk": 64}  # blocks are small: split them anyway
+    # neighbourhood sizes in sorted order (the counts of the search)
+    counts = np.empty(n_pts, dtype=np.int64)
+
+    def ball(c0, c1, *args):
+        t0 = int(cell_start[c0])
+
+        def run(lo, hi, *a):
+            g.ball_cells_local(c0 + lo, c0 + hi, t0, *a)
+
+        parallel_rows(run, c1 - c0, n_jobs, *search, *args, **few)
+
+    blocks = list(itertools.pairwise(bounds))
+    if normals_from is None:
+        # normals straight from each ball, sorted, nothing stored
+        n = np.empty((n_pts, 3), dtype=np.float32)
+        curvature = np.empty(n_pts, dtype=np.float32)
+        est = (p, viewpoint.astype(np.float32), n, curvature)
+        for c0, c1 in blocks:
+            t0, t1 = int(cell_start[c0]), int(cell_start[c1])
+            ball(c0, c1, none, counts[t0:t1], none_i, *est)
+        del curvature, est
+    else:
+        n = normals_from
+        for c0, c1 in blocks:
+            t0, t1 = int(cell_start[c0]), int(cell_start[c1])
+            ball(c0, c1, none, counts[t0:t1], none_i, *no_normals)
+    out = np.zeros((n_pts, n_bins**3), dtype=np.float32)
+    pool = _pos_pool(p, n_jobs)
+    for c0, c1 in blocks:
+        t0, t1 = int(cell_start[c0]), int(cell_start[c1])
+        indptr = np.zeros(t1 - t0 + 1, dtype=np.int64)
+        np.cumsum(counts[t0:t1], out=indptr[1:])
+        indices = np.empty(indptr[-1], dtype=np.int32)
+        ball(c0, c1, indptr, counts[t0:t1], indices, *no_normals)
+        point_of = order[t0:t1]
+        args = (p, n, indptr, indices, n_bins, out)
+        if len(indices) >= ROW_MIN * len(point_of) and n_bins**3 < 2**15:
+            rows = _space_order(p[point_of], radius)
+            _pfh_reuse(rows, point_of, *args, n_jobs, pool)
+        else:
+            _pfh_rows_local(point_of, *args, n_jobs)
+        del indptr, indices
+    sizes = np.empty(n_pts, dtype=np.int64)
+    sizes[order] = counts
+    undefined = ~np.isfinite(n).all(axis=1) | (sizes < 2)
+    return out, undefined, offsets
+
+
+def _pfh_rows_local(point_of, p, n, indptr, indices, n_bins, out, n_jobs):
+    """:func:`pfh_rows` on a CSR whose row ``r`` is point ``point_of[r]``:
+    the PFH rows computed in a block and scattered into ``out``."""
+    from skpcd.features._pfh_kernels import pfh_rows
+
+    block = np.zeros((len(point_of), n_bins**3), dtype=np.float32)
+    # pfh_rows reads the query point only through its neighbourhood
+    args = (p, n, indptr, indices, n_bins, block)
+    parallel_rows(pfh_rows, len(point_of), n_jobs, *args, min_chunk=256)
+    out[point_of] = block
 
 
 # Pair counts up to this many are turned into PCL's sums by table lookup.
@@ -556,6 +689,22 @@ class PFHTransformer(_LocalDescriptor):
 
     def _width(self):
         return int(self.n_bins) ** 3
+
+    def _compute(self, X, clouds=None):
+        if self.radius is None or not (
+            self.normal_n_neighbors is None and self.normal_radius is None
+        ):
+            return super()._compute(X, clouds)
+        # radius search: neighbourhoods block by block (memory)
+        self._check_search()
+        if clouds is None:
+            clouds = self._validate(X)
+        normals = None
+        if self.normals == "columns":
+            normals = np.vstack([c[:, 3:6] for c in clouds]).astype(np.float32)
+        vp = _check_viewpoint(self.viewpoint)
+        args = (float(self.radius), int(self.n_bins), normals, vp, self.n_jobs)
+        return _pfh_radius_blocked(clouds, *args)
 
     def _kernel(self, p, normals, nb):
         return _pfh_packed(p, normals.pop(), nb, int(self.n_bins), self.n_jobs)

@@ -757,8 +757,10 @@ def _ordered_code(points, normals, indices, start, perm, u, v, n_bins):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def pfh_rows_reuse(lo, hi, rows, points, normals, indptr, indices, n_bins, out):
-    """PFH of the points ``rows[lo:hi]``, reusing pair codes between queries.
+def pfh_rows_reuse(
+    lo, hi, rows, point_of, pos, points, normals, indptr, indices, n_bins, out
+):  # fmt: skip
+    """PFH of the rows ``rows[lo:hi]``, reusing pair codes between queries.
 
     The same as :func:`pfh_rows` (every row bit-identical), for large
     neighbourhoods (radius searches) visited in a spatially coherent order
@@ -770,10 +772,17 @@ def pfh_rows_reuse(lo, hi, rows, points, normals, indptr, indices, n_bins, out):
     looks up its pairs of points already seen there and computes only the
     pairs with a new point (in SIMD lanes, as :func:`pfh_rows`) and the
     order-dependent ones (with the scalar path, in PCL's order).
+
+    Row ``r`` of the CSR ``indptr``/``indices`` is the neighbourhood of
+    point ``point_of[r]`` (of point ``r`` if ``point_of`` is empty), whose
+    PFH goes to that row of ``out``. ``pos`` (one int32 per point, all -1)
+    is scratch, all -1 again on return.
     """
     if hi <= lo:
         return
     rows = borrow(rows)
+    point_of = borrow(point_of)
+    pos = borrow(pos)
     points = borrow(points)
     normals = borrow(normals)
     indptr = borrow(indptr)
@@ -783,10 +792,8 @@ def pfh_rows_reuse(lo, hi, rows, points, normals, indptr, indices, n_bins, out):
     margin = nb * D_PI * 1e-4
     m_max = 1
     for r in range(lo, hi):
-        i = rows[r]
-        m_max = max(m_max, indptr[i + 1] - indptr[i])
-    pos_own = np.full(len(points), -1, dtype=np.int32)
-    pos = borrow(pos_own)
+        li = rows[r]
+        m_max = max(m_max, indptr[li + 1] - indptr[li])
     c_own = np.empty((2, m_max, m_max), dtype=np.int16)
     i_own = np.empty((5, m_max), dtype=np.int64)
     prev_pts = borrow(i_own[0])  # the previous neighbourhood's points
@@ -800,9 +807,10 @@ def pfh_rows_reuse(lo, hi, rows, points, normals, indptr, indices, n_bins, out):
     n_prev = 0
     cur = 0
     for r in range(lo, hi):
-        i = rows[r]
-        start = indptr[i]
-        m = indptr[i + 1] - start
+        li = rows[r]
+        i = point_of[li] if len(point_of) else li
+        start = indptr[li]
+        m = indptr[li + 1] - start
         if m < 2:
             continue
         incr = F100 / np.float32((m * (m - 1)) // 2)
@@ -870,7 +878,8 @@ def pfh_rows_reuse(lo, hi, rows, points, normals, indptr, indices, n_bins, out):
             prev_pts[u] = j
         n_prev = m
         cur = 1 - cur
-    keep(pos_own)
+    for t in range(n_prev):
+        pos[prev_pts[t]] = -1
     keep(c_own)
     keep(i_own)
     keep(good_own)

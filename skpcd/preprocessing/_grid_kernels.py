@@ -26,6 +26,7 @@ import math
 import numpy as np
 from numba import njit
 
+from skpcd.preprocessing._normals_kernels import _normal_row
 from skpcd.utils._numba import borrow, keep
 
 # Cells per axis stay below this, so a cell key fits in an int64.
@@ -410,7 +411,42 @@ def ball_cells(
     otherwise fills ``indices`` and ``sqdist`` (unless empty), each row
     sorted by (distance, index), the point first.
     """
-    fill = len(indptr) > 0
+    f32 = np.empty((0, 3), dtype=np.float32)
+    f1 = np.empty(0, dtype=np.float32)
+    _ball(
+        lo, hi, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2,
+        indptr, counts, indices, sqdist, -1, f32, f1, f32, f1,
+    )  # fmt: skip
+
+
+@njit(cache=True, nogil=True)
+def ball_cells_local(
+    lo, hi, base, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims,
+    r2, indptr, counts, indices, points, viewpoint, normals, curvature,
+):  # fmt: skip
+    """:func:`ball_cells` with rows numbered by sorted position: the point
+    at position ``t`` of ``order`` is row ``t - base`` of ``counts`` and of
+    the CSR ``indptr``/``indices`` (no squared distances), so that a block
+    of cells gets its own small neighbourhood arrays. With ``normals``
+    non-empty, nothing is stored but the counts and each point's normal and
+    curvature (:func:`~skpcd.preprocessing._normals_kernels.normals_rows`
+    on the sorted neighbourhood, float32 ``points``)."""
+    _ball(
+        lo, hi, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2,
+        indptr, counts, indices, indices[:0].astype(np.float32), base,
+        points, viewpoint, normals, curvature,
+    )  # fmt: skip
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _ball(
+    lo, hi, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2,
+    indptr, counts, indices, sqdist, base, points, viewpoint, normals, curvature,
+):  # fmt: skip
+    """The body of :func:`ball_cells` (rows by point, ``base`` < 0) and
+    :func:`ball_cells_local` (rows by sorted position minus ``base``)."""
+    with_normals = len(normals) > 0
+    fill = len(indptr) > 0 or with_normals
     xs = borrow(xs)
     order = borrow(order)
     cell_cloud = borrow(cell_cloud)
@@ -422,24 +458,37 @@ def ball_cells(
     counts = borrow(counts)
     indices = borrow(indices)
     sqdist = borrow(sqdist)
-    k_max = 1
-    if fill:
-        for t in range(cell_start[lo], cell_start[hi]):
-            i = order[t]
-            k_max = max(k_max, indptr[i + 1] - indptr[i])
-    f_own = np.empty(k_max)
-    i_own = np.empty(k_max + 27, dtype=np.int64)
-    bd, bi = borrow(f_own), borrow(i_own[:k_max])
-    cur = borrow(i_own[k_max : k_max + 9])
-    starts = borrow(i_own[k_max + 9 : k_max + 18])
-    stops = borrow(i_own[k_max + 18 :])
+    points = borrow(points)
+    viewpoint = borrow(viewpoint)
+    normals = borrow(normals)
+    curvature = borrow(curvature)
+    # scratch for a ball, grown to the points of the 27 cells when needed
+    cap = 64
+    f_own = np.empty(cap)
+    b_own = np.empty(cap, dtype=np.int64)
+    bd, bi = borrow(f_own), borrow(b_own)
+    i_own = np.empty(27, dtype=np.int64)
+    cur = borrow(i_own[:9])
+    starts = borrow(i_own[9:18])
+    stops = borrow(i_own[18:])
+    ends_own = np.zeros(2, dtype=np.int64)
+    ends = borrow(ends_own)
     for cell in range(lo, hi):
         n_runs = _block(
             cell, cell - 1 if cell > lo else -1, cell_cloud, cell_key, cell_start,
             cloud_cells, dims, cur, starts, stops,
         )  # fmt: skip
+        total = 0
+        for r in range(n_runs):
+            total += stops[r] - starts[r]
+        if fill and total > cap:
+            cap = max(total, 2 * cap)
+            f_own = np.empty(cap)
+            b_own = np.empty(cap, dtype=np.int64)
+            bd, bi = borrow(f_own), borrow(b_own)
         for t0 in range(cell_start[cell], cell_start[cell + 1]):
             i = order[t0]
+            row = i if base < 0 else t0 - base
             qx, qy, qz = xs[t0, 0], xs[t0, 1], xs[t0, 2]
             m = 0
             for r in range(n_runs):
@@ -455,7 +504,7 @@ def ball_cells(
                             bd[m] = -1.0 if j == i else d2
                         m += 1
             if not fill:
-                counts[i] = m
+                counts[row] = m
                 continue
             # Shell sort by (distance, index), Ciura's gaps: no allocation
             for gap in (701, 301, 132, 57, 23, 10, 4, 1):
@@ -470,9 +519,17 @@ def ball_cells(
                         b -= gap
                     bd[b] = d
                     bi[b] = j
-            _write_row(indices, sqdist, indptr[i], i, bi, bd, m)
+            if with_normals:
+                counts[row] = m
+                bi[0] = i  # the point first, as _write_row stores it
+                ends[1] = m
+                _normal_row(points, ends, bi, viewpoint, normals, curvature, 0, i)
+                continue
+            _write_row(indices, sqdist, indptr[row], i, bi, bd, m)
     keep(f_own)
+    keep(b_own)
     keep(i_own)
+    keep(ends_own)
 
 
 @njit(cache=True, nogil=True)

@@ -16,6 +16,8 @@ import math
 import numpy as np
 from numba import njit
 
+from skpcd.utils._numba import borrow
+
 F0 = np.float32(0.0)
 F05 = np.float32(0.5)
 F1 = np.float32(1.0)
@@ -112,47 +114,77 @@ def normals_rows(lo, hi, points, indptr, indices, viewpoint, normals, curvature)
     ``curvature`` (n,) are filled in place. Fewer than three neighbours give
     NaN normal and curvature (PCL's rule).
     """
+    points, indptr, indices = borrow(points), borrow(indptr), borrow(indices)
+    viewpoint, normals, curvature = (
+        borrow(viewpoint),
+        borrow(normals),
+        borrow(curvature),
+    )
     for i in range(lo, hi):
-        start, stop = indptr[i], indptr[i + 1]
-        m = stop - start
-        if m < 3:
-            normals[i, 0] = normals[i, 1] = normals[i, 2] = np.nan
-            curvature[i] = np.nan
-            continue
-        k = indices[start]
-        kx, ky, kz = points[k, 0], points[k, 1], points[k, 2]
-        a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = F0
-        for t in range(start, stop):
-            j = indices[t]
-            x = points[j, 0] - kx
-            y = points[j, 1] - ky
-            z = points[j, 2] - kz
-            a0 += x * x
-            a1 += x * y
-            a2 += x * z
-            a3 += y * y
-            a4 += y * z
-            a5 += z * z
-            a6 += x
-            a7 += y
-            a8 += z
-        cnt = np.float32(m)
-        a0, a1, a2, a3, a4 = a0 / cnt, a1 / cnt, a2 / cnt, a3 / cnt, a4 / cnt
-        a5, a6, a7, a8 = a5 / cnt, a6 / cnt, a7 / cnt, a8 / cnt
-        c00 = a0 - a6 * a6
-        c01 = a1 - a6 * a7
-        c02 = a2 - a6 * a8
-        c11 = a3 - a7 * a7
-        c12 = a4 - a7 * a8
-        c22 = a5 - a8 * a8
-        lam, nx, ny, nz = eigen33_smallest(c00, c01, c02, c11, c12, c22)
-        trace = (c00 + c11) + c22
-        curvature[i] = abs(lam / trace) if trace != F0 else F0
-        vx = viewpoint[0] - points[i, 0]
-        vy = viewpoint[1] - points[i, 1]
-        vz = viewpoint[2] - points[i, 2]
-        if (vx * nx + vy * ny) + vz * nz < F0:
-            nx, ny, nz = -nx, -ny, -nz
-        normals[i, 0] = nx
-        normals[i, 1] = ny
-        normals[i, 2] = nz
+        _normal_row(points, indptr, indices, viewpoint, normals, curvature, i, i)
+
+
+@njit(cache=True, nogil=True)
+def normals_rows_local(
+    lo, hi, point_of, points, indptr, indices, viewpoint, normals, curvature
+):  # fmt: skip
+    """:func:`normals_rows` for a CSR whose row ``r`` is the neighbourhood of
+    point ``point_of[r]``, rows ``lo`` to ``hi``."""
+    points, indptr, indices = borrow(points), borrow(indptr), borrow(indices)
+    viewpoint, normals, curvature = (
+        borrow(viewpoint),
+        borrow(normals),
+        borrow(curvature),
+    )
+    point_of = borrow(point_of)
+    for r in range(lo, hi):
+        i = point_of[r]
+        _normal_row(points, indptr, indices, viewpoint, normals, curvature, r, i)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _normal_row(points, indptr, indices, viewpoint, normals, curvature, r, i):
+    """Normal and curvature of point ``i`` from CSR row ``r``. Inlined."""
+    start, stop = indptr[r], indptr[r + 1]
+    m = stop - start
+    if m < 3:
+        normals[i, 0] = normals[i, 1] = normals[i, 2] = np.nan
+        curvature[i] = np.nan
+        return
+    k = indices[start]
+    kx, ky, kz = points[k, 0], points[k, 1], points[k, 2]
+    a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = F0
+    for t in range(start, stop):
+        j = indices[t]
+        x = points[j, 0] - kx
+        y = points[j, 1] - ky
+        z = points[j, 2] - kz
+        a0 += x * x
+        a1 += x * y
+        a2 += x * z
+        a3 += y * y
+        a4 += y * z
+        a5 += z * z
+        a6 += x
+        a7 += y
+        a8 += z
+    cnt = np.float32(m)
+    a0, a1, a2, a3, a4 = a0 / cnt, a1 / cnt, a2 / cnt, a3 / cnt, a4 / cnt
+    a5, a6, a7, a8 = a5 / cnt, a6 / cnt, a7 / cnt, a8 / cnt
+    c00 = a0 - a6 * a6
+    c01 = a1 - a6 * a7
+    c02 = a2 - a6 * a8
+    c11 = a3 - a7 * a7
+    c12 = a4 - a7 * a8
+    c22 = a5 - a8 * a8
+    lam, nx, ny, nz = eigen33_smallest(c00, c01, c02, c11, c12, c22)
+    trace = (c00 + c11) + c22
+    curvature[i] = abs(lam / trace) if trace != F0 else F0
+    vx = viewpoint[0] - points[i, 0]
+    vy = viewpoint[1] - points[i, 1]
+    vz = viewpoint[2] - points[i, 2]
+    if (vx * nx + vy * ny) + vz * nz < F0:
+        nx, ny, nz = -nx, -ny, -nz
+    normals[i, 0] = nx
+    normals[i, 1] = ny
+    normals[i, 2] = nz

@@ -283,7 +283,12 @@ def test_simd_kernels_equal_the_scalar_pair_path():
     # neighbourhoods side by side, large ones one point at a time)
     from numba import njit
 
-    from skpcd.features._pfh import _fpfh_from_counts, _space_order, _spfh_counts
+    from skpcd.features._pfh import (
+        _fpfh_from_counts,
+        _radius_of,
+        _space_order,
+        _spfh_counts,
+    )
     from skpcd.features._pfh_kernels import ROW_MIN, _exact_code, pfh_rows_reuse
 
     @njit
@@ -341,11 +346,13 @@ def test_simd_kernels_equal_the_scalar_pair_path():
             np.testing.assert_array_equal(got, ref)
             # pair codes reused between neighbourhoods, in any visiting order
             orders = [np.arange(len(pts)), rng.permutation(len(pts))]
-            orders.append(_space_order(pts, nb))
+            orders.append(_space_order(pts, _radius_of(pts, nb)))
             for rows in orders:
                 reused = np.zeros_like(got)
                 args = (pts, normals, nb.indptr, nb.indices, n_bins, reused)
-                pfh_rows_reuse(0, len(pts), rows, *args)
+                pos = np.full(len(pts), -1, dtype=np.int32)
+                pfh_rows_reuse(0, len(pts), rows, np.empty(0, np.int64), pos, *args)
+                assert (pos == -1).all()
                 np.testing.assert_array_equal(reused, ref)
             got_counts, table = _spfh_counts(pts, normals, nb, n_bins, None)
             np.testing.assert_array_equal(got_counts, counts)
@@ -379,3 +386,30 @@ def test_feature_names_match_the_pooled_columns(est, names):
     got = est.get_feature_names_out()
     assert len(got) == out.shape[1]
     assert [got[0], got[-1]] == names
+
+
+@pytest.mark.parametrize("normals", ["estimate", "columns"])
+def test_radius_pfh_in_blocks_equals_one_pass(monkeypatch, normals):
+    # the radius PFHTransformer searches and bins block by block (memory);
+    # every row must be the one-pass result, whatever the blocks
+    import skpcd.features._pfh as mod
+
+    rng = np.random.default_rng(3)
+    clouds = []
+    for n in (700, 5, 1, 900):  # a tiny cloud: undefined normals and rows
+        c = rng.uniform(0, 3, (n, 3))
+        c[:, 2] *= 0.05
+        clouds.append(np.c_[c, rng.normal(size=(n, 3))])
+    clouds[3][:30, :3] = clouds[3][30:60, :3]  # duplicates
+    monkeypatch.setattr(mod, "_BLOCK", 97)
+    for undefined in ("keep", "nan", "drop"):
+        est = PFHTransformer(radius=0.3, normals=normals, undefined=undefined)
+        got = est.fit_transform(clouds)
+        with monkeypatch.context() as m:  # one search, one kernel call
+            m.setattr(PFHTransformer, "_compute", mod._LocalDescriptor._compute)
+            ref = est.fit_transform(clouds)
+        assert len(got) == len(ref)
+        for a, b in zip(got, ref, strict=True):
+            np.testing.assert_array_equal(a, b)
+    mask = est.undefined_mask(clouds)
+    assert mask[2].all() and not mask[0].all()
