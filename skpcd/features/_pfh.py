@@ -103,7 +103,9 @@ def _pfh_packed(p, n, nb, n_bins, n_jobs):
         # large neighbourhoods: visited in space order, consecutive ones
         # share most of their pairs (pfh_rows_reuse)
         rows = _space_order(p, _radius_of(p, nb))
-        _pfh_reuse(rows, np.empty(0, np.int64), *args, n_jobs, _pos_pool(p, n_jobs))
+        sorted_nb = (np.empty((0, 3)), np.empty(0, np.int32))
+        rows = (rows, np.empty(0, np.int64), *sorted_nb)
+        _pfh_reuse(*rows, *args, n_jobs, _pos_pool(p, n_jobs))
     else:
         parallel_rows(pfh_rows, len(p), n_jobs, *args)
     return out
@@ -120,14 +122,17 @@ def _pos_pool(p, n_jobs):
     return pool
 
 
-def _pfh_reuse(rows, point_of, p, n, indptr, indices, n_bins, out, n_jobs, pool):
-    """PFH of the CSR rows ``rows`` (in that order) with pair codes reused."""
+def _pfh_reuse(
+    rows, point_of, xs, inv, p, n, indptr, indices, n_bins, out, n_jobs, pool
+):
+    """PFH of the CSR rows ``rows`` (in that order) with pair codes reused
+    (see :func:`~skpcd.features._pfh_kernels.pfh_rows_reuse`)."""
     from skpcd.features._pfh_kernels import pfh_rows_reuse
 
     def run(lo, hi, *args):
         pos = pool.get()
         try:
-            pfh_rows_reuse(lo, hi, rows, point_of, pos, *args)
+            pfh_rows_reuse(lo, hi, rows, point_of, pos, xs, inv, *args)
         finally:
             pool.put(pos)
 
@@ -211,26 +216,31 @@ def _pfh_radius_blocked(clouds, radius, n_bins, normals_from, viewpoint, n_jobs)
         est = (p, viewpoint.astype(np.float32), n, curvature)
         for c0, c1 in blocks:
             t0, t1 = int(cell_start[c0]), int(cell_start[c1])
-            ball(c0, c1, none, counts[t0:t1], none_i, *est)
+            ball(c0, c1, none, counts[t0:t1], none_i, *est, True)
         del curvature, est
     else:
         n = normals_from
         for c0, c1 in blocks:
             t0, t1 = int(cell_start[c0]), int(cell_start[c1])
-            ball(c0, c1, none, counts[t0:t1], none_i, *no_normals)
+            ball(c0, c1, none, counts[t0:t1], none_i, *no_normals, True)
     out = np.zeros((n_pts, n_bins**3), dtype=np.float32)
     pool = _pos_pool(p, n_jobs)
+    # each point's row in the grid order: pfh_rows_reuse orders the pairs
+    # of an unsorted ball by the search's own distances (xs)
+    inv = np.empty(n_pts, dtype=np.int32)
+    inv[order] = np.arange(n_pts, dtype=np.int32)
     for c0, c1 in blocks:
         t0, t1 = int(cell_start[c0]), int(cell_start[c1])
         indptr = np.zeros(t1 - t0 + 1, dtype=np.int64)
         np.cumsum(counts[t0:t1], out=indptr[1:])
+        reuse = indptr[-1] >= ROW_MIN * (t1 - t0) and n_bins**3 < 2**15
         indices = np.empty(indptr[-1], dtype=np.int32)
-        ball(c0, c1, indptr, counts[t0:t1], indices, *no_normals)
+        ball(c0, c1, indptr, counts[t0:t1], indices, *no_normals, not reuse)
         point_of = order[t0:t1]
         args = (p, n, indptr, indices, n_bins, out)
-        if len(indices) >= ROW_MIN * len(point_of) and n_bins**3 < 2**15:
+        if reuse:
             rows = _space_order(p[point_of], radius)
-            _pfh_reuse(rows, point_of, *args, n_jobs, pool)
+            _pfh_reuse(rows, point_of, xs, inv, *args, n_jobs, pool)
         else:
             _pfh_rows_local(point_of, *args, n_jobs)
         del indptr, indices

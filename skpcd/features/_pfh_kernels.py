@@ -738,15 +738,22 @@ def _symmetric(pax, pay, paz, nax, nay, naz, pbx, pby, pbz, nbx, nby, nbz):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _ordered_code(points, normals, indices, start, perm, u, v, n_bins):
+def _ordered_code(points, normals, indices, start, perm, u, v, n_bins, xs, inv, i):
     """:func:`_exact_code` of the pair at positions ``u`` and ``v`` of
     :func:`pfh_rows_reuse`'s order, the entry later in the neighbourhood
-    first, as PCL. Inlined (arrays)."""
+    first, as PCL. With ``inv`` non-empty the neighbourhood is not sorted:
+    "later" is then the larger (squared distance to point ``i``, index),
+    the distance computed as the search computes it (float64 ``xs``, the
+    points in grid order, point ``j`` at row ``inv[j]``; the point itself
+    first). Inlined (arrays)."""
     a, b = perm[u], perm[v]
-    if a < b:
-        a, b = b, a
     ja = indices[start + a]
     jb = indices[start + b]
+    if len(inv):
+        if _after(xs, inv, i, jb, ja):
+            ja, jb = jb, ja
+    elif a < b:
+        ja, jb = jb, ja
     return _exact_code(
         points[ja, 0], points[ja, 1], points[ja, 2],
         normals[ja, 0], normals[ja, 1], normals[ja, 2],
@@ -756,9 +763,31 @@ def _ordered_code(points, normals, indices, start, perm, u, v, n_bins):
     )  # fmt: skip
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _after(xs, inv, i, ja, jb):
+    """Whether point ``ja`` comes after ``jb`` in point ``i``'s sorted
+    neighbourhood (see :func:`_ordered_code`). Inlined (arrays)."""
+    if ja == i:
+        return False
+    if jb == i:
+        return True
+    q = inv[i]
+    ta, tb = inv[ja], inv[jb]
+    ex = xs[ta, 0] - xs[q, 0]
+    ey = xs[ta, 1] - xs[q, 1]
+    ez = xs[ta, 2] - xs[q, 2]
+    da = ex * ex + ey * ey + ez * ez
+    ex = xs[tb, 0] - xs[q, 0]
+    ey = xs[tb, 1] - xs[q, 1]
+    ez = xs[tb, 2] - xs[q, 2]
+    db = ex * ex + ey * ey + ez * ez
+    return da > db or (da == db and ja > jb)
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def pfh_rows_reuse(
-    lo, hi, rows, point_of, pos, points, normals, indptr, indices, n_bins, out
+    lo, hi, rows, point_of, pos, xs, inv, points, normals, indptr, indices, n_bins,
+    out,
 ):  # fmt: skip
     """PFH of the rows ``rows[lo:hi]``, reusing pair codes between queries.
 
@@ -776,13 +805,16 @@ def pfh_rows_reuse(
     Row ``r`` of the CSR ``indptr``/``indices`` is the neighbourhood of
     point ``point_of[r]`` (of point ``r`` if ``point_of`` is empty), whose
     PFH goes to that row of ``out``. ``pos`` (one int32 per point, all -1)
-    is scratch, all -1 again on return.
+    is scratch, all -1 again on return. With ``inv`` non-empty, the
+    neighbourhoods need not be sorted (see :func:`_ordered_code`).
     """
     if hi <= lo:
         return
     rows = borrow(rows)
     point_of = borrow(point_of)
     pos = borrow(pos)
+    xs = borrow(xs)
+    inv = borrow(inv)
     points = borrow(points)
     normals = borrow(normals)
     indptr = borrow(indptr)
@@ -842,7 +874,7 @@ def pfh_rows_reuse(
                 Cc[u, v] = c
                 if c < 0:
                     c = _ordered_code(
-                        points, normals, indices, start, perm, u, v, n_bins
+                        points, normals, indices, start, perm, u, v, n_bins, xs, inv, i
                     )
                 out[i, c] += incr
         # pairs with a new point: in SIMD lanes
@@ -866,7 +898,7 @@ def pfh_rows_reuse(
                 else:
                     Cc[u, v] = -1
                     c = _ordered_code(
-                        points, normals, indices, start, perm, u, v, n_bins
+                        points, normals, indices, start, perm, u, v, n_bins, xs, inv, i
                     )
                 out[i, c] += incr
         # this neighbourhood's positions, for the next one

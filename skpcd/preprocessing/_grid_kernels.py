@@ -415,14 +415,14 @@ def ball_cells(
     f1 = np.empty(0, dtype=np.float32)
     _ball(
         lo, hi, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2,
-        indptr, counts, indices, sqdist, -1, f32, f1, f32, f1,
+        indptr, counts, indices, sqdist, -1, f32, f1, f32, f1, True,
     )  # fmt: skip
 
 
 @njit(cache=True, nogil=True)
 def ball_cells_local(
     lo, hi, base, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims,
-    r2, indptr, counts, indices, points, viewpoint, normals, curvature,
+    r2, indptr, counts, indices, points, viewpoint, normals, curvature, sort,
 ):  # fmt: skip
     """:func:`ball_cells` with rows numbered by sorted position: the point
     at position ``t`` of ``order`` is row ``t - base`` of ``counts`` and of
@@ -430,11 +430,12 @@ def ball_cells_local(
     of cells gets its own small neighbourhood arrays. With ``normals``
     non-empty, nothing is stored but the counts and each point's normal and
     curvature (:func:`~skpcd.preprocessing._normals_kernels.normals_rows`
-    on the sorted neighbourhood, float32 ``points``)."""
+    on the sorted neighbourhood, float32 ``points``). Rows are sorted only
+    with ``sort``."""
     _ball(
         lo, hi, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2,
         indptr, counts, indices, indices[:0].astype(np.float32), base,
-        points, viewpoint, normals, curvature,
+        points, viewpoint, normals, curvature, sort or len(normals) > 0,
     )  # fmt: skip
 
 
@@ -442,6 +443,7 @@ def ball_cells_local(
 def _ball(
     lo, hi, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2,
     indptr, counts, indices, sqdist, base, points, viewpoint, normals, curvature,
+    sort,
 ):  # fmt: skip
     """The body of :func:`ball_cells` (rows by point, ``base`` < 0) and
     :func:`ball_cells_local` (rows by sorted position minus ``base``)."""
@@ -505,6 +507,10 @@ def _ball(
                         m += 1
             if not fill:
                 counts[row] = m
+                continue
+            if not sort:  # the ball as found (pfh_rows_reuse orders pairs itself)
+                for r in range(m):
+                    indices[indptr[row] + r] = bi[r]
                 continue
             # Shell sort by (distance, index), Ciura's gaps: no allocation
             for gap in (701, 301, 132, 57, 23, 10, 4, 1):

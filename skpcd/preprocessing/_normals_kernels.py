@@ -124,24 +124,6 @@ def normals_rows(lo, hi, points, indptr, indices, viewpoint, normals, curvature)
         _normal_row(points, indptr, indices, viewpoint, normals, curvature, i, i)
 
 
-@njit(cache=True, nogil=True)
-def normals_rows_local(
-    lo, hi, point_of, points, indptr, indices, viewpoint, normals, curvature
-):  # fmt: skip
-    """:func:`normals_rows` for a CSR whose row ``r`` is the neighbourhood of
-    point ``point_of[r]``, rows ``lo`` to ``hi``."""
-    points, indptr, indices = borrow(points), borrow(indptr), borrow(indices)
-    viewpoint, normals, curvature = (
-        borrow(viewpoint),
-        borrow(normals),
-        borrow(curvature),
-    )
-    point_of = borrow(point_of)
-    for r in range(lo, hi):
-        i = point_of[r]
-        _normal_row(points, indptr, indices, viewpoint, normals, curvature, r, i)
-
-
 @njit(cache=True, nogil=True, inline="always")
 def _normal_row(points, indptr, indices, viewpoint, normals, curvature, r, i):
     """Normal and curvature of point ``i`` from CSR row ``r``. Inlined."""

@@ -351,7 +351,9 @@ def test_simd_kernels_equal_the_scalar_pair_path():
                 reused = np.zeros_like(got)
                 args = (pts, normals, nb.indptr, nb.indices, n_bins, reused)
                 pos = np.full(len(pts), -1, dtype=np.int32)
-                pfh_rows_reuse(0, len(pts), rows, np.empty(0, np.int64), pos, *args)
+                sorted_nb = (np.empty((0, 3)), np.empty(0, np.int32))
+                none = np.empty(0, np.int64)
+                pfh_rows_reuse(0, len(pts), rows, none, pos, *sorted_nb, *args)
                 assert (pos == -1).all()
                 np.testing.assert_array_equal(reused, ref)
             got_counts, table = _spfh_counts(pts, normals, nb, n_bins, None)
@@ -401,9 +403,12 @@ def test_radius_pfh_in_blocks_equals_one_pass(monkeypatch, normals):
         c[:, 2] *= 0.05
         clouds.append(np.c_[c, rng.normal(size=(n, 3))])
     clouds[3][:30, :3] = clouds[3][30:60, :3]  # duplicates
+    # pairs whose bins depend on which point comes first (|a1| == |a2|)
+    line = np.c_[0.01 * np.arange(60), np.zeros((60, 2))]
+    clouds.append(np.c_[line, np.tile([[0.6, 0, 0.8], [0.6, 0.8, 0]], (30, 1))])
     monkeypatch.setattr(mod, "_BLOCK", 97)
     for undefined in ("keep", "nan", "drop"):
-        est = PFHTransformer(radius=0.3, normals=normals, undefined=undefined)
+        est = PFHTransformer(radius=0.45, normals=normals, undefined=undefined)
         got = est.fit_transform(clouds)
         with monkeypatch.context() as m:  # one search, one kernel call
             m.setattr(PFHTransformer, "_compute", mod._LocalDescriptor._compute)
