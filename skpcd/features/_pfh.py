@@ -97,7 +97,7 @@ def _pfh_packed(p, n, nb, n_bins, n_jobs):
     """PFH kernel over float32 packed arrays."""
     from skpcd.features._pfh_kernels import ROW_MIN, pfh_rows
 
-    out = np.zeros((len(p), n_bins**3), dtype=np.float32)
+    out = _zeros((len(p), n_bins**3), np.float32)
     args = (p, n, nb.indptr, nb.indices, n_bins, out)
     if len(p) and len(nb.indices) >= ROW_MIN * len(p) and n_bins**3 < 2**15:
         # large neighbourhoods: visited in space order, consecutive ones
@@ -109,6 +109,26 @@ def _pfh_packed(p, n, nb, n_bins, n_jobs):
     else:
         parallel_rows(pfh_rows, len(p), n_jobs, *args)
     return out
+
+
+def _zeros(shape, dtype):
+    """A zeroed output array; a large one in its own anonymous memory map.
+
+    The C heap keeps a freed block below its (self-raising) mmap threshold,
+    so the output of one call would stay resident after the caller drops
+    it, and the next call's peak would add up with it. Mapped on its own,
+    an output goes back to the system with its last view; its pages are
+    zero and resident only once written, like ``np.zeros``'.
+    """
+    import mmap
+
+    nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+    if nbytes < 1 << 20:
+        return np.zeros(shape, dtype=dtype)
+    buf = mmap.mmap(-1, nbytes)
+    if hasattr(mmap, "MADV_HUGEPAGE"):
+        buf.madvise(mmap.MADV_HUGEPAGE)  # as numpy does for large arrays
+    return np.frombuffer(buf, dtype=dtype).reshape(shape)
 
 
 def _pos_pool(p, n_jobs):
@@ -179,6 +199,7 @@ def _pfh_radius_blocked(clouds, radius, n_bins, normals_from, viewpoint, n_jobs)
     from skpcd.preprocessing import _grid_kernels as g
     from skpcd.preprocessing._neighbors import _build_grid, _grid_shape
 
+    release_free_memory()  # e.g. the pages of a previous call's output
     offsets = np.zeros(len(clouds) + 1, dtype=np.int64)
     np.cumsum([len(c) for c in clouds], out=offsets[1:])
     xyz = np.ascontiguousarray(np.vstack([c[:, :3] for c in clouds]), dtype=np.float64)
@@ -223,7 +244,8 @@ def _pfh_radius_blocked(clouds, radius, n_bins, normals_from, viewpoint, n_jobs)
         for c0, c1 in blocks:
             t0, t1 = int(cell_start[c0]), int(cell_start[c1])
             ball(c0, c1, none, counts[t0:t1], none_i, *no_normals, True)
-    out = np.zeros((n_pts, n_bins**3), dtype=np.float32)
+    release_free_memory()  # the pages of the freed temporaries, before the output
+    out = _zeros((n_pts, n_bins**3), np.float32)
     pool = _pos_pool(p, n_jobs)
     # each point's row in the grid order: pfh_rows_reuse orders the pairs
     # of an unsorted ball by the search's own distances (xs)
@@ -246,6 +268,8 @@ def _pfh_radius_blocked(clouds, radius, n_bins, normals_from, viewpoint, n_jobs)
         del indptr, indices
     sizes = np.empty(n_pts, dtype=np.int64)
     sizes[order] = counts
+    del pool, inv, xs, counts
+    release_free_memory()  # the blocks' scratch, not kept for the next call
     undefined = ~np.isfinite(n).all(axis=1) | (sizes < 2)
     return out, undefined, offsets
 
@@ -309,7 +333,7 @@ def _fpfh_from_counts(p, counts, table, nb, n_bins, convention, n_jobs):
     from skpcd.features._pfh_kernels import fpfh_rows
 
     mode = FPFH_CONVENTIONS.index(convention)
-    out = np.zeros((len(p), 3 * n_bins), dtype=np.float64 if mode == 2 else np.float32)
+    out = _zeros((len(p), 3 * n_bins), np.float64 if mode == 2 else np.float32)
     args = (p, counts, nb.indptr, nb.indices, table, n_bins, mode, out)
     parallel_rows(fpfh_rows, len(p), n_jobs, *args)
     return out.astype(np.float32, copy=False)
