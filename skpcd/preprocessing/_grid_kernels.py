@@ -291,6 +291,13 @@ def knn_cells(
     block_stop = borrow(i_own[k_max + 18 : k_max + 27])
     shell_start = borrow(i_own[k_max + 27 : k_max + 27 + n_shell])
     shell_stop = borrow(i_own[k_max + 27 + n_shell :])
+    # the block's points side by side (x, y, z, sorted position), shared by
+    # the queries of a cell: their distances are computed in SIMD lanes
+    cap = 64
+    g_own = np.empty((4, cap))
+    t_own = np.empty(cap, dtype=np.int64)
+    blk_x, blk_y, blk_z = borrow(g_own[0]), borrow(g_own[1]), borrow(g_own[2])
+    blk_d, blk_t = borrow(g_own[3]), borrow(t_own)
     prev = -1
     for p in range(lo, hi):
         cell = cells[p]
@@ -299,6 +306,23 @@ def knn_cells(
             block_start, block_stop,
         )  # fmt: skip
         prev = cell
+        n_cand = 0
+        for r in range(n_block):
+            n_cand += block_stop[r] - block_start[r]
+        if n_cand > cap:
+            cap = max(n_cand, 2 * cap)
+            g_own = np.empty((4, cap))
+            t_own = np.empty(cap, dtype=np.int64)
+            blk_x, blk_y = borrow(g_own[0]), borrow(g_own[1])
+            blk_z, blk_d, blk_t = borrow(g_own[2]), borrow(g_own[3]), borrow(t_own)
+        n_cand = 0
+        for r in range(n_block):
+            for t in range(block_start[r], block_stop[r]):
+                blk_x[n_cand] = xs[t, 0]
+                blk_y[n_cand] = xs[t, 1]
+                blk_z[n_cand] = xs[t, 2]
+                blk_t[n_cand] = t
+                n_cand += 1
         c = cell_cloud[cell]
         c_lo, c_hi = cloud_cells[c], cloud_cells[c + 1]
         nx, ny, nz = dims[c, 0], dims[c, 1], dims[c, 2]
@@ -314,7 +338,19 @@ def knn_cells(
             bi[0] = i
             count = 1
             s = 1
-            starts, stops, n_runs = block_start, block_stop, n_block
+            # the block: distances in SIMD lanes, then the few insertions
+            for u in range(n_cand):
+                ex = blk_x[u] - qx
+                ey = blk_y[u] - qy
+                ez = blk_z[u] - qz
+                blk_d[u] = ex * ex + ey * ey + ez * ez
+            for u in range(n_cand):
+                d2 = blk_d[u]
+                t = blk_t[u]
+                # most candidates fail this test: the call stays rare
+                if t != t0 and (count < kc or d2 <= bd[kc - 1]):
+                    count = _insert(bd, bi, count, kc, d2, order[t])
+            starts, stops, n_runs = block_start, block_stop, 0
             while True:
                 for r in range(n_runs):
                     for t in range(starts[r], stops[r]):
@@ -322,7 +358,6 @@ def knn_cells(
                         ey = xs[t, 1] - qy
                         ez = xs[t, 2] - qz
                         d2 = ex * ex + ey * ey + ez * ez
-                        # most candidates fail this test: the call stays rare
                         if t != t0 and (count < kc or d2 <= bd[kc - 1]):
                             count = _insert(bd, bi, count, kc, d2, order[t])
                 # distance from the query to the space outside the scanned cells
@@ -398,6 +433,8 @@ def knn_cells(
                 _write_row(indices, sqdist, indptr[i], i, bi, bd, kc)
     keep(f_own)
     keep(i_own)
+    keep(g_own)
+    keep(t_own)
 
 
 @njit(cache=True, nogil=True)
