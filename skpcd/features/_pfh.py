@@ -125,9 +125,15 @@ def _zeros(shape, dtype):
     nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
     if nbytes < 1 << 20:
         return np.zeros(shape, dtype=dtype)
-    buf = mmap.mmap(-1, nbytes)
-    if hasattr(mmap, "MADV_HUGEPAGE"):
-        buf.madvise(mmap.MADV_HUGEPAGE)  # as numpy does for large arrays
+    if hasattr(mmap, "MAP_PRIVATE"):
+        # private: a shared anonymous map is shmem, without transparent huge
+        # pages (a 4 KiB page fault every 4 KiB of output)
+        buf = mmap.mmap(-1, nbytes, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+    else:
+        buf = mmap.mmap(-1, nbytes)
+    if hasattr(mmap, "MADV_HUGEPAGE") and nbytes >= 32 << 20:
+        # as numpy does for large arrays: 512 times fewer page faults
+        buf.madvise(mmap.MADV_HUGEPAGE)
     return np.frombuffer(buf, dtype=dtype).reshape(shape)
 
 
