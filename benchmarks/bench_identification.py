@@ -699,6 +699,8 @@ def write_text(res, path):
         f"CV: {meta['cv']}; machine {meta['machine']}; n_jobs={meta['n_jobs']}; "
         f"total {meta['total_seconds']:.0f} s"
     )
+    if "runs" in meta:
+        L.append(meta["runs"])
     L.append("accuracy in %, mean ± std over the folds")
     L.append("")
     L.append("descriptor time (s, computed once, cached):")
@@ -742,7 +744,8 @@ def write_text(res, path):
         for r in res["two_step"]:
             head = (
                 f"  [{r['setting']}] {r['features']} / {r['classifier']} / "
-                f"{r['model']}: acc {_pm(r['accuracy_mean'], r['accuracy_std'])}"
+                f"{r['model']}: acc {_pm(r['accuracy_mean'], r['accuracy_std'])}, "
+                f"balanced {100 * r['balanced_accuracy_mean']:.1f}"
             )
             if "groups_found" in r:
                 head += f"  groups found {r['groups_found']}"
