@@ -118,6 +118,37 @@ def test_fit_predict_describe_round_trip(tmp_path, capsys):
     assert d["fpfh_offsets"][-1] == len(d["fpfh"]) and d["fpfh"].shape[1] == 33
 
 
+def test_case_based_pipeline_fit_predict_gives_similarities(tmp_path, capsys):
+    import csv
+
+    from skpcd.io import load_model
+
+    train, test = tmp_path / "train", tmp_path / "test"
+    _labelled_folder(train, n_per_class=8, random_state=1)
+    truth = _labelled_folder(test, n_per_class=4, random_state=2)
+    model = tmp_path / "model.joblib"
+    args = ["fit", str(train), "-o", str(model), "--pipeline", "case-based"]
+    assert main([*args, "--quiet"]) == 0
+    assert load_model(model)[-1].threshold == 0.8
+    out = tmp_path / "pred.csv"
+    assert main(["predict", str(model), str(test), "-o", str(out), "--quiet"]) == 0
+    rows = list(csv.DictReader(out.open()))
+    similarity = np.array([float(r["similarity"]) for r in rows])
+    assert "probability" not in rows[0]
+    assert ((similarity >= -1) & (similarity <= 1)).all()
+    labels = np.array([r["label"] for r in rows])
+    # below the paper's threshold a segment is "unknown", never a class
+    assert (labels[similarity < 0.8] == "unknown").all()
+    assert (labels[similarity >= 0.8] != "unknown").all()
+    known = labels != "unknown"
+    # 40 synthetic cases: about half the answers pass 0.8, 7 of those 9 right
+    assert known.sum() >= 5
+    assert np.mean(labels[known] == np.asarray(truth)[known]) >= 0.6
+    capsys.readouterr()
+    assert main(["evaluate", str(train), "--pipeline", "case-based", "--quiet"]) == 0
+    assert "case-based: improved FPFH" in capsys.readouterr().out
+
+
 def test_outputs_are_never_overwritten_without_asking(tmp_path, capsys):
     _labelled_folder(tmp_path / "seg", n_per_class=3)
     model = tmp_path / "model.joblib"

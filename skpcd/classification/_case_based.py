@@ -144,7 +144,9 @@ class CaseBasedClassifier(ClassifierMixin, BaseEstimator):
     w1 : float, default=0.5
         Weight of the volume term, between 0 and 1; the histogram's weight
         is ``w2 = 1 - w1``. The paper leaves both to the user. Ignored when
-        ``volume_column`` is None.
+        ``volume_column`` is None. Tune it: on the DALES objects an inner
+        cross-validation chose ``w1`` between 0.005 and 0.1, and 0.5 cost
+        8 to 16 points of accuracy (:ref:`identification`).
     volume_column : int, default=None
         Column of X holding the volumes (negative indices count from the
         end); the other columns are the histogram. None: every column is

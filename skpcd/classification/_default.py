@@ -1,9 +1,9 @@
-"""The default identification pipeline used by ``skpcd evaluate``."""
+"""The default identification pipeline used by ``skpcd evaluate`` and ``skpcd fit``."""
 
 from sklearn.ensemble import RandomForestClassifier
-from sklearn.pipeline import make_pipeline
+from sklearn.pipeline import FeatureUnion, make_pipeline
 
-from skpcd.features import ShapeFeatures
+from skpcd.features import PFHTransformer, ShapeFeatures
 
 __all__ = ["make_default_pipeline"]
 
@@ -12,23 +12,40 @@ def make_default_pipeline(*, random_state=0, n_jobs=None):
     """Build the default segment-identification pipeline.
 
     Global shape features of each segment (:class:`~skpcd.features.ShapeFeatures`)
-    followed by a random forest of 300 trees. It takes a list of clouds and
-    predicts one label per cloud; it composes with
+    beside its PFH averaged over its points
+    (:class:`~skpcd.features.PFHTransformer` with ``n_neighbors=10`` and
+    ``pooling="mean"``), followed by a random forest of 300 trees. It takes
+    a list of clouds and predicts one label per cloud; it composes with
     :func:`~sklearn.model_selection.cross_val_score` and
     :class:`~sklearn.model_selection.GridSearchCV` like any scikit-learn
-    pipeline (``randomforestclassifier__max_features``...).
+    pipeline (``randomforestclassifier__max_features``,
+    ``featureunion__pfh__n_neighbors``...).
 
     Parameters
     ----------
     random_state : int, RandomState instance or None, default=0
         Seeds the forest.
     n_jobs : int, default=None
-        Threads for the forest; None means 1, -1 all cores.
+        Threads for the PFH and the forest; None means 1, -1 all cores.
 
     Returns
     -------
     pipeline : sklearn.pipeline.Pipeline
         An unfitted pipeline.
+
+    Notes
+    -----
+    Chosen by cross-validation on the 399 DALES objects (5 folds x 3,
+    ``benchmarks/bench_identification.py``) among 27 pipelines built from
+    skpcd's pieces: 99.1 +/- 1.3 % accuracy, against 97.5 +/- 1.2 % for the
+    shape features alone with the same forest; a nested cross-validation
+    that picks the pipeline inside each training fold also scores 99.1 %.
+    The PFH alone scores far lower (93 % at best): on aerial objects size,
+    height and verticality carry most of the information, and the averaged
+    PFH adds the local surface shape (it mostly separates trees from poles
+    and buildings). Points whose PFH is undefined are left out of the mean;
+    a segment without any defined PFH gets NaN columns, which the forest
+    accepts. See :ref:`identification`.
 
     Examples
     --------
@@ -40,7 +57,12 @@ def make_default_pipeline(*, random_state=0, n_jobs=None):
     (10,)
     """
     return make_pipeline(
-        ShapeFeatures(),
+        FeatureUnion(
+            [
+                ("shape", ShapeFeatures()),
+                ("pfh", PFHTransformer(n_neighbors=10, pooling="mean", n_jobs=n_jobs)),
+            ]
+        ),
         RandomForestClassifier(
             n_estimators=300, random_state=random_state, n_jobs=n_jobs
         ),

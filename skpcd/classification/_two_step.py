@@ -125,7 +125,7 @@ class TwoStepClassifier(ClassifierMixin, BaseEstimator):
     separated by a classifier that sees only them, instead of being drowned
     by the abundant classes (He et al., 2017).
 
-    Read more in the :ref:`User Guide <quickstart>`.
+    Read more in the :ref:`User Guide <identification>`.
 
     Parameters
     ----------
