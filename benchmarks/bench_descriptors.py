@@ -627,6 +627,9 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--long", type=float, default=60.0, help="no repeat above (s)")
     ap.add_argument("--radius-points", type=int, default=20000)
+    ap.add_argument(
+        "--large-repeat", type=int, default=1, help="runs of the large-cloud cases"
+    )
     ap.add_argument("--no-pcl", action="store_true")
     ap.add_argument("--no-open3d", action="store_true")
     ap.add_argument("--no-large", action="store_true")
@@ -777,7 +780,7 @@ def _main(a, R, groups, tmp):
         if desc not in groups:
             continue
         for layout in layouts:
-            rep = 1 if layout == "large" else None
+            rep = a.large_repeat if layout == "large" else None
             tag = f"{desc} k={K}"
             if pcl is not None:
                 fs, cat = pcl_files(layout)
