@@ -118,7 +118,7 @@ def _zeros(shape, dtype):
     so the output of one call would stay resident after the caller drops
     it, and the next call's peak would add up with it. Mapped on its own,
     an output goes back to the system with its last view; its pages are
-    zero and resident only once written, like ``np.zeros``'.
+    zero, and resident from the start (the kernels write them all).
     """
     import mmap
 
@@ -127,11 +127,14 @@ def _zeros(shape, dtype):
         return np.zeros(shape, dtype=dtype)
     if hasattr(mmap, "MAP_PRIVATE"):
         # private: a shared anonymous map is shmem, slower to fault in.
-        # Huge pages (MADV_HUGEPAGE, as numpy advises) are not asked for: on
-        # the benchmark VM they made the first call in a process on a 2.6M
-        # point cloud 1.5x slower (fresh memory for every 2 MiB page), for
-        # a few percent on later calls
-        buf = mmap.mmap(-1, nbytes, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+        # Populated at once: faulted in page by page from the kernel threads,
+        # the faults contend (PFH k=10, two threads: 1.6 s of system time
+        # against 0.3 s with one). Huge pages (MADV_HUGEPAGE, as numpy
+        # advises) are not asked for: on the benchmark VM they made the
+        # first call in a process on a 2.6M point cloud 1.5x slower
+        flags = mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS
+        flags |= getattr(mmap, "MAP_POPULATE", 0)
+        buf = mmap.mmap(-1, nbytes, flags=flags)
     else:
         buf = mmap.mmap(-1, nbytes)
     return np.frombuffer(buf, dtype=dtype).reshape(shape)
