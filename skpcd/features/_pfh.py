@@ -118,7 +118,8 @@ def _zeros(shape, dtype):
     so the output of one call would stay resident after the caller drops
     it, and the next call's peak would add up with it. Mapped on its own,
     an output goes back to the system with its last view; its pages are
-    zero, and resident from the start (the kernels write them all).
+    zero, and resident from the start above 32 MiB (the kernels write them
+    all), as written below.
     """
     import mmap
 
@@ -133,7 +134,8 @@ def _zeros(shape, dtype):
         # advises) are not asked for: on the benchmark VM they made the
         # first call in a process on a 2.6M point cloud 1.5x slower
         flags = mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS
-        flags |= getattr(mmap, "MAP_POPULATE", 0)
+        if nbytes >= 32 << 20:  # small outputs: their pages as written
+            flags |= getattr(mmap, "MAP_POPULATE", 0)
         buf = mmap.mmap(-1, nbytes, flags=flags)
     else:
         buf = mmap.mmap(-1, nbytes)
