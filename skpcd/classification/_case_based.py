@@ -9,7 +9,7 @@ from sklearn.base import BaseEstimator, ClassifierMixin, _fit_context
 from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.multiclass import check_classification_targets
-from sklearn.utils.validation import check_is_fitted, validate_data
+from sklearn.utils.validation import check_array, check_is_fitted, validate_data
 
 from skpcd.utils._parallel import effective_threads
 
@@ -26,18 +26,27 @@ _PAIR_BYTES = 8 * 10
 
 
 def _split(X, volume_column):
-    """The volumes (or None) and the histograms, as float64."""
+    """The volumes (or None) and the histograms, as float64.
+
+    Each histogram is divided by its largest absolute value: the
+    correlation does not change, and neither its sums of squares overflow
+    (values above 1e154) nor underflow (below 1e-154).
+    """
     X = np.asarray(X, dtype=np.float64)
     if volume_column is None:
-        return None, X
-    col = volume_column % X.shape[1]
-    volume = X[:, col].copy()
-    if (volume < 0).any():
-        raise ValueError(
-            f"column {volume_column} holds the volumes and must not be negative; "
-            f"got {volume.min()} (set volume_column=None to use no volume)"
-        )
-    return volume, np.delete(X, col, axis=1)
+        volume, H = None, X
+    else:
+        col = volume_column % X.shape[1]
+        volume = X[:, col].copy()
+        if (volume < 0).any():
+            raise ValueError(
+                f"column {volume_column} holds the volumes and must not be "
+                f"negative; got {volume.min()} (set volume_column=None to use no "
+                "volume)"
+            )
+        H = np.delete(X, col, axis=1)
+    scale = np.abs(H).max(axis=1, initial=0.0, keepdims=True)
+    return volume, H / np.where(scale > 0, scale, 1.0)
 
 
 def _stats(H):
@@ -106,6 +115,13 @@ def case_similarity(A, B, *, w1=0.5, volume_column=None):
         Between -1 and 1. See :class:`CaseBasedClassifier` for the
         undefined cases.
 
+    Raises
+    ------
+    ValueError
+        If ``A`` or ``B`` is not 2-D, is empty or holds NaN or infinite
+        values, if their widths differ, if ``volume_column`` is out of range
+        or a volume is negative, or if ``w1`` is not in [0, 1].
+
     Examples
     --------
     >>> from skpcd.classification import case_similarity
@@ -114,8 +130,27 @@ def case_similarity(A, B, *, w1=0.5, volume_column=None):
     >>> round(float(case_similarity(a, b, w1=0.5, volume_column=0)[0, 0]), 4)
     0.6737
     """
-    A = np.asarray(A, dtype=np.float64)
-    B = np.asarray(B, dtype=np.float64)
+    if not (isinstance(w1, Real) and 0 <= w1 <= 1):
+        raise ValueError(f"w1 must be a number from 0 to 1, got {w1!r}")
+    min_features = 1 if volume_column is None else 2
+    kw = {"dtype": np.float64, "ensure_min_features": min_features}
+    A = check_array(A, input_name="A", **kw)
+    B = check_array(B, input_name="B", **kw)
+    if A.shape[1] != B.shape[1]:
+        raise ValueError(
+            f"A has {A.shape[1]} columns and B has {B.shape[1]}: the cases must "
+            "have the same layout"
+        )
+    if volume_column is not None:
+        if not isinstance(volume_column, Integral):
+            raise TypeError(
+                f"volume_column must be an int or None, got {volume_column!r}"
+            )
+        if not -A.shape[1] <= volume_column < A.shape[1]:
+            raise ValueError(
+                f"volume_column={volume_column} is out of range for cases with "
+                f"{A.shape[1]} columns"
+            )
     va, Ha = _split(A, volume_column)
     vb, Hb = _split(B, volume_column)
     pa, *sa = _stats(Ha)
@@ -251,7 +286,7 @@ class CaseBasedClassifier(ClassifierMixin, BaseEstimator):
         "w1": [Interval(Real, 0, 1, closed="both")],
         "volume_column": [Integral, None],
         "threshold": [Interval(Real, -1, 1, closed="both"), None],
-        "unknown_label": "no_validation",
+        "unknown_label": [str, Real, None],
         "algorithm": [StrOptions({"auto", "exact", "approximate"})],
         "n_candidates": [Interval(Integral, 1, None, closed="left")],
         "random_state": ["random_state"],
@@ -297,8 +332,8 @@ class CaseBasedClassifier(ClassifierMixin, BaseEstimator):
             return self.unknown_label
         if self.classes_.dtype.kind in "OUS":
             return "unknown"
-        low = self.classes_.min() - 1
-        return -1 if low >= -1 else low.item()
+        low = self.classes_.min().item() - 1  # a Python number: no uint wrap
+        return -1 if low >= -1 else low
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, X, y):

@@ -1,8 +1,11 @@
 import pickle
+import warnings
 
 import numpy as np
 import pytest
 import sklearn
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from numpy.testing import assert_allclose, assert_array_equal
 from sklearn.base import clone
 from sklearn.calibration import CalibratedClassifierCV
@@ -309,3 +312,103 @@ def test_grid_search_on_dales_clouds(dales_cases):
     assert scores.max() > 0.5  # five classes: chance is 0.2
     model = pickle.loads(pickle.dumps(grid.best_estimator_))
     assert_array_equal(model.predict(clouds), grid.predict(clouds))
+
+
+# -- bad input and properties ----------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("A", "B", "kw", "message"),
+    [
+        ([[1.0, np.nan, 2]], [[1.0, 2, 3]], {}, "A contains NaN"),
+        ([[1.0, 2, 3]], [[1.0, np.inf, 3]], {}, "B contains infinity"),
+        ([[1.0, 2, 3]], [[1.0, 2]], {}, "A has 3 columns and B has 2"),
+        ([1.0, 2, 3], [1.0, 2, 3], {}, "Expected 2D array"),
+        (np.ones((2, 2, 2)), np.ones((2, 2, 2)), {}, "dim 3"),
+        (np.empty((0, 3)), [[1.0, 2, 3]], {}, "0 sample"),
+        ([[1.0]], [[2.0]], {"volume_column": 0}, "minimum of 2"),
+        ([[1.0, 2, 3]], [[2.0, 1, 1]], {"volume_column": 5}, "out of range"),
+        ([[1.0, 2, 3]], [[2.0, 1, 1]], {"volume_column": 0, "w1": 3}, "w1"),
+        ([[1.0, 2, 3]], [[2.0, 1, 1]], {"volume_column": 0, "w1": -1}, "w1"),
+    ],
+)
+def test_case_similarity_rejects_bad_input(A, B, kw, message):
+    # before: NaN for NaN/inf, a silently wrapped volume_column, w1 = 3
+    # giving 1.5, and matmul/einsum/AxisError messages for bad shapes
+    with pytest.raises(ValueError, match=message):
+        case_similarity(A, B, **kw)
+
+
+def test_extreme_magnitudes_give_the_correlation_of_the_scaled_histograms():
+    # the sums of squares overflowed (NaN) or underflowed (a wrong 1.0)
+    want = case_similarity([[1.0, 2, 0]], [[1.0, 3, 1]])
+    assert_allclose(want, [[np.sqrt(3) / 2]])
+    for scale in (1e-200, 1e200):
+        a, b = [[scale, 2 * scale, 0]], [[scale, 3 * scale, scale]]
+        assert_allclose(case_similarity(a, b), want, rtol=1e-12)
+        model = CaseBasedClassifier(threshold=None).fit(b, ["b"])
+        assert_allclose(model.class_similarity(a), want, rtol=1e-12)
+
+
+def test_unknown_label_must_be_a_scalar_and_uint_classes_do_not_wrap():
+    from sklearn.utils._param_validation import InvalidParameterError
+
+    X = _cases(10, seed=3)[:, 1:]
+    y = np.arange(10) % 2
+    # a list was broadcast into the predictions: [1], a training class
+    with pytest.raises(InvalidParameterError, match="unknown_label"):
+        CaseBasedClassifier(unknown_label=[1], threshold=0.99).fit(X, y)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # was: overflow in scalar subtract
+        model = CaseBasedClassifier(threshold=0.99).fit(X, y.astype(np.uint8))
+    assert model.unknown_label_ == -1
+    assert (model.predict(-X) == -1).any()
+
+
+_hist = st.lists(
+    st.lists(st.one_of(st.just(0.0), st.floats(0.5, 100.0)), min_size=5, max_size=5),
+    min_size=1,
+    max_size=6,
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(a=_hist, b=_hist, scale=st.floats(1e-3, 1e3))
+def test_case_similarity_properties(a, b, scale):
+    A, B = np.array(a), np.array(b)
+    S = case_similarity(A, B)
+    assert ((S >= -1) & (S <= 1)).all()
+    assert_allclose(case_similarity(B, A), S.T, atol=1e-12)  # symmetric
+    # a histogram scaled by a positive factor is as similar to every case
+    assert_allclose(case_similarity(scale * A, B), S, atol=1e-9)
+    V = np.column_stack([np.arange(len(A)) * scale, A])
+    W = np.column_stack([np.arange(len(B)) + 1.0, B])
+    SV = case_similarity(V, W, w1=0.3, volume_column=0)
+    assert ((SV >= -1) & (SV <= 1)).all()
+    assert_allclose(case_similarity(W, V, w1=0.3, volume_column=0), SV.T, atol=1e-12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    n=st.integers(4, 12),
+    threshold=st.sampled_from([None, 0.0, 0.8]),
+)
+def test_predictions_do_not_depend_on_the_order_of_the_cases(seed, n, threshold):
+    rng = np.random.default_rng(seed)
+    X = _cases(n, n_bins=6, seed=seed)
+    y = rng.choice(["a", "b", "c"], n)
+    Q = _cases(5, n_bins=6, seed=seed + 1)
+    perm = rng.permutation(n)
+    params = {"volume_column": 0, "w1": 0.3, "threshold": threshold}
+    model = CaseBasedClassifier(**params).fit(X, y)
+    shuffled = CaseBasedClassifier(**params).fit(X[perm], y[perm])
+    # class similarities are maxima over each class: the order cannot matter
+    assert_array_equal(shuffled.class_similarity(Q), model.class_similarity(Q))
+    # ties between classes go to the first of classes_, sorted either way
+    assert_array_equal(shuffled.predict(Q), model.predict(Q))
+    # retrieve: the same ranked similarities, of the same cases
+    s1, i1 = model.retrieve(Q, n_cases=n)
+    s2, i2 = shuffled.retrieve(Q, n_cases=n)
+    assert_array_equal(s1, s2)
+    assert_array_equal(np.sort(perm[i2], axis=1), np.sort(i1, axis=1))
