@@ -61,7 +61,8 @@ def _load_labelled(args):
         default = Path(args.folder) / "labels.csv"
         if not default.is_file():
             raise SystemExit(
-                f"skpcd evaluate: {args.folder} has no labels.csv; pass --labels CSV"
+                f"skpcd {args.command}: {args.folder} has no labels.csv; pass "
+                "--labels CSV"
             )
         labels = default
     clouds, y, _ = read_segments(args.folder, labels, verbose=not args.quiet)
@@ -111,6 +112,11 @@ def _cmd_evaluate(args):
 
     from skpcd.utils._progress import progress
 
+    if args.folds < 2 or args.repeats < 1:
+        raise SystemExit(
+            f"skpcd evaluate: --folds must be at least 2 and --repeats at least 1, "
+            f"got {args.folds} and {args.repeats}"
+        )
     clouds, y, source = _load_labelled(args)
     classes, counts = np.unique(y, return_counts=True)
     if counts.min() < args.folds:
@@ -197,10 +203,21 @@ def _check_output(path, overwrite, command):
     return path
 
 
+def _check_output_place(out, command):
+    """Refuse, before any work, an output that is a folder or in no folder."""
+    if out.is_dir():
+        raise SystemExit(f"skpcd {command}: {out} is a folder; give a file name")
+    if not out.parent.is_dir():
+        raise SystemExit(
+            f"skpcd {command}: the folder {out.parent} of {out.name} does not exist"
+        )
+    return out
+
+
 def _cmd_fit(args):
     from skpcd.io import save_model
 
-    out = _check_output(args.output, args.overwrite, "fit")
+    out = _check_output_place(_check_output(args.output, args.overwrite, "fit"), "fit")
     clouds, y, source = _load_labelled(args)
     classes, counts = np.unique(y, return_counts=True)
     print(f"data      {source}: {len(clouds)} segments, {len(classes)} classes")
@@ -245,9 +262,23 @@ def _cmd_predict(args):
     from skpcd.io import load_model, read_segments
 
     out = _check_output(args.output, args.overwrite, "predict")
+    _check_output_place(out, "predict")
+    if out.resolve() == Path(args.model).resolve():
+        raise SystemExit(f"skpcd predict: the output {out} is the model file")
     model = load_model(args.model)
+    if not hasattr(model, "predict"):
+        raise SystemExit(
+            f"skpcd predict: {args.model} holds a {type(model).__name__}, not a "
+            "fitted model; write one with skpcd fit"
+        )
     clouds, _, names = read_segments(args.folder, verbose=not args.quiet)
-    pred = np.asarray(model.predict(clouds))
+    try:
+        pred = np.asarray(model.predict(clouds))
+    except ValueError as exc:  # e.g. a model of 2-D features, not of clouds
+        raise SystemExit(
+            f"skpcd predict: the model in {args.model} cannot label these "
+            f"segments ({type(model).__name__}: {exc}); write one with skpcd fit"
+        ) from exc
     kind, score = _scores(model, clouds, pred)
     with open(out, "w", newline="") as f:
         writer = csv.writer(f)
@@ -286,8 +317,14 @@ def _cmd_describe(args):
     from skpcd.io import read_segments
 
     out = _check_output(args.output, args.overwrite, "describe")
+    _check_output_place(out, "describe")
     available = _segment_descriptors(args.n_neighbors, args.n_jobs)
     wanted = [d.strip() for d in args.descriptors.split(",") if d.strip()]
+    if not wanted and not args.local:
+        raise SystemExit(
+            f"skpcd describe: no descriptor asked for (--descriptors "
+            f"{args.descriptors!r}); choose from {', '.join(available)}"
+        )
     unknown = sorted(set(wanted) - set(available))
     if unknown:
         raise SystemExit(
@@ -304,15 +341,20 @@ def _cmd_describe(args):
     for name in wanted:
         start = time.perf_counter()
         est = available[name]
-        arrays[name] = np.asarray(est.fit_transform(clouds), dtype=np.float64)
+        try:
+            arrays[name] = np.asarray(est.fit_transform(clouds), dtype=np.float64)
+        except ValueError as exc:  # e.g. --n-neighbors out of range
+            raise SystemExit(f"skpcd describe: {name}: {exc}") from exc
         arrays[f"{name}_columns"] = np.asarray(est.get_feature_names_out(), dtype=str)
         print(f"{name:<14}{arrays[name].shape}  {time.perf_counter() - start:.1f} s")
     if args.local:
         cls = {"pfh": PFHTransformer, "fpfh": FPFHTransformer}[args.local]
         start = time.perf_counter()
-        rows = cls(n_neighbors=args.n_neighbors, n_jobs=args.n_jobs).fit_transform(
-            clouds
-        )
+        try:
+            rows = cls(n_neighbors=args.n_neighbors, n_jobs=args.n_jobs)
+            rows = rows.fit_transform(clouds)
+        except ValueError as exc:
+            raise SystemExit(f"skpcd describe: {args.local}: {exc}") from exc
         arrays[args.local] = np.vstack(rows)
         arrays[f"{args.local}_offsets"] = np.cumsum([0] + [len(r) for r in rows])
         print(

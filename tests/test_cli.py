@@ -282,3 +282,92 @@ def test_segment_and_identify_bad_inputs(tmp_path, capsys):
     assert not out.exists()
     with pytest.raises(SystemExit, match="not a folder"):
         main(["segment", str(bad), "-o", str(bad)])
+
+
+# --- bad arguments of fit, predict, describe and evaluate ------------------------
+
+
+@pytest.mark.parametrize("command", ["fit", "describe", "predict"])
+def test_output_folder_problems_are_found_before_any_work(tmp_path, command):
+    # before: a FileNotFoundError/IsADirectoryError after fitting or computing
+    # the descriptors (describe also left a .tmp.npz behind)
+    _labelled_folder(tmp_path / "seg", n_per_class=1)
+    model = tmp_path / "model.joblib"
+    model.write_text("never read")
+    first = {"predict": [str(model)]}.get(command, [])
+    for out, message in [
+        (
+            tmp_path / "missing" / "out.x",
+            "the folder .*missing of out.x does not exist",
+        ),
+        (tmp_path / "seg", "is a folder; give a file name"),
+    ]:
+        argv = [command, *first, str(tmp_path / "seg"), "-o", str(out), "--quiet"]
+        with pytest.raises(SystemExit, match=message):
+            main([*argv, "--overwrite"])
+    assert not (tmp_path / "missing").exists()
+    assert not list((tmp_path / "seg").glob(".*"))
+
+
+def test_predict_never_writes_over_its_model(tmp_path):
+    _labelled_folder(tmp_path / "seg", n_per_class=1)
+    model = tmp_path / "model.joblib"
+    model.write_text("precious")
+    with pytest.raises(SystemExit, match="is the model file"):
+        main(["predict", str(model), str(tmp_path / "seg"), "-o",
+              str(tmp_path / "." / "model.joblib"), "--overwrite"])  # fmt: skip
+    assert model.read_text() == "precious"
+
+
+def test_predict_with_a_model_that_is_not_a_cloud_classifier(tmp_path):
+    from sklearn.linear_model import LogisticRegression
+
+    from skpcd.io import save_model
+
+    _labelled_folder(tmp_path / "seg", n_per_class=1)
+    out = tmp_path / "p.csv"
+    # a saved object without predict: was AttributeError: 'dict' object ...
+    save_model({"a": 1}, tmp_path / "dict.joblib")
+    with pytest.raises(SystemExit, match="holds a dict, not a fitted model"):
+        main(["predict", str(tmp_path / "dict.joblib"), str(tmp_path / "seg"),
+              "-o", str(out)])  # fmt: skip
+    # a model of 2-D features, given clouds: was numpy's inhomogeneous shape
+    lr = LogisticRegression().fit([[0.0, 1], [1, 0]], ["a", "b"])
+    save_model(lr, tmp_path / "lr.joblib")
+    with pytest.raises(
+        SystemExit, match=r"cannot label these segments \(LogisticRegression"
+    ):
+        main(["predict", str(tmp_path / "lr.joblib"), str(tmp_path / "seg"),
+              "-o", str(out)])  # fmt: skip
+    assert not out.exists()
+
+
+def test_describe_bad_descriptor_options(tmp_path):
+    _labelled_folder(tmp_path, n_per_class=1)
+    out = tmp_path / "d.npz"
+    # was: an .npz holding the names only
+    with pytest.raises(SystemExit, match="no descriptor asked for"):
+        main(["describe", str(tmp_path), "-o", str(out), "--descriptors", ","])
+    # was: InvalidParameterError raised from the transformer
+    with pytest.raises(SystemExit, match="improved_pfh: The 'n_neighbors'"):
+        main(["describe", str(tmp_path), "-o", str(out), "--quiet",
+              "--descriptors", "improved_pfh", "--n-neighbors", "0"])  # fmt: skip
+    with pytest.raises(SystemExit, match="pfh: The 'n_neighbors'"):
+        main(["describe", str(tmp_path), "-o", str(out), "--quiet", "--descriptors",
+              "shape", "--local", "pfh", "--n-neighbors", "1"])  # fmt: skip
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "options", [["--folds", "1"], ["--folds", "0"], ["--repeats", "0"]]
+)
+def test_evaluate_needs_two_folds_and_a_repeat(tmp_path, options, capsys):
+    # was: a ValueError from scikit-learn's splitter after the data were read
+    with pytest.raises(SystemExit, match="--folds must be at least 2"):
+        main(["evaluate", str(tmp_path), "--quiet", *options])
+    assert capsys.readouterr().out == ""
+
+
+def test_fit_without_labels_names_the_fit_command(tmp_path):
+    with pytest.raises(SystemExit, match=r"^skpcd fit: .* has no labels.csv"):
+        main(["fit", str(tmp_path), "-o", str(tmp_path / "m.joblib")])
