@@ -71,6 +71,17 @@ def _check_descriptors(X):
                 f"X[{i}] has {d.shape[1]} features but X[0] has {width}: every "
                 "descriptor array must have the same width."
             )
+        if d.size:
+            # squared distances to the words must not overflow (inf - inf
+            # is NaN, and the nearest word then silently wrong)
+            top = max(np.fmax.reduce(d, axis=None), -np.fmin.reduce(d, axis=None))
+            limit = np.sqrt(np.finfo(d.dtype).max / width) / 4
+            if np.isfinite(top) and top > limit:
+                raise ValueError(
+                    f"X[{i}] has a value of magnitude {top:.3g}; {d.dtype} "
+                    f"descriptors of {width} features must stay below "
+                    f"{limit:.3g} for their squared distances not to overflow."
+                )
     return descs
 
 
@@ -207,7 +218,8 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
     they are neither clustered nor counted, and ``n_undefined_`` says how
     many :meth:`fit` skipped. A cloud without any defined descriptor (empty,
     or all NaN) gets an all-zero row under every ``norm``. Infinite values
-    are an error.
+    are an error, and so are values whose squared distances would overflow
+    (above about 1e153 for float64, 1e18 for float32).
 
     **Word assignment.** Exact assignment costs
     ``n_descriptors * n_words * n_features`` operations (as matrix products,

@@ -4,6 +4,8 @@ import warnings
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from sklearn.base import clone
 from sklearn.cluster import DBSCAN, KMeans, MiniBatchKMeans
 from sklearn.feature_extraction.text import TfidfTransformer
@@ -374,3 +376,59 @@ def test_pfh_bof_svm_pipeline_on_real_objects(dales_small):
         grid.best_estimator_["pfh"].transform(clouds[:3])
     ).shape == (3, grid.best_params_["bof__n_words"])
     assert grid.predict(clouds[:5]).shape == (5,)
+
+
+# -- bad input and properties ----------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("value", "dtype"), [(1e308, np.float64), (1e200, np.float64), (1e20, np.float32)]
+)
+def test_values_whose_squared_distances_overflow_are_refused(value, dtype):
+    # was: inf - inf = NaN in the distances and a silently wrong word (the
+    # 1e308 descriptor counted under the word at the origin)
+    X = [np.array([[value, value], [0, 0], [1, 1], [2, 2]], dtype=dtype)]
+    with pytest.raises(ValueError, match=r"X\[0\] has a value of magnitude"):
+        BagOfFeatures(n_words=2, random_state=0).fit(X)
+    small = [np.array([[1e3, 1e3], [0, 0], [1, 1], [2, 2]], dtype=dtype)]
+    bof = BagOfFeatures(n_words=2, norm=None, random_state=0).fit(small)
+    with pytest.raises(ValueError, match=r"X\[1\] has a value of magnitude"):
+        bof.transform([small[0], X[0]])
+    # just below the limit the counts are right
+    big = [np.array([[1e15, 1e15], [0, 0], [1, 1], [2, 2]], dtype=dtype)]
+    counts = bof.fit(big).transform(big)
+    assert sorted(counts[0].tolist()) == [1.0, 3.0]
+
+
+@pytest.fixture(scope="module")
+def fixed_bof():
+    X, _ = blobs(n_clouds=6, seed=0)
+    return BagOfFeatures(n_words=5, norm=None, random_state=0).fit(X)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    sizes=st.lists(st.integers(0, 12), min_size=1, max_size=6),
+    batch=st.sampled_from([1, 3, 7, 1 << 15]),
+)
+def test_counts_do_not_depend_on_any_order(fixed_bof, seed, sizes, batch):
+    from skpcd.encoding import _bag
+
+    rng = np.random.default_rng(seed)
+    X = [rng.normal(scale=6.0, size=(n, 4)) for n in sizes]
+    for d in X:
+        d[rng.random(len(d)) < 0.2] = np.nan  # undefined rows among them
+    want = ref_counts(X, fixed_bof.vocabulary_)
+    within = [d[rng.permutation(len(d))] for d in X]
+    order = rng.permutation(len(X))
+    before = _bag._BATCH_ROWS
+    _bag._BATCH_ROWS = batch  # blocks cut inside and across clouds
+    try:
+        np.testing.assert_array_equal(fixed_bof.transform(X), want)
+        np.testing.assert_array_equal(fixed_bof.transform(within), want)
+        np.testing.assert_array_equal(
+            fixed_bof.transform([X[i] for i in order]), want[order]
+        )
+    finally:
+        _bag._BATCH_ROWS = before
