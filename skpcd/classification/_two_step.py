@@ -10,6 +10,7 @@ classifiers and any grouping of the labels.
 
 import typing
 import warnings
+from numbers import Number
 
 import numpy as np
 from sklearn.base import BaseEstimator, ClassifierMixin, _fit_context, clone
@@ -29,6 +30,15 @@ __all__ = ["TwoStepClassifier"]
 _LABEL_COLLECTIONS = (list, tuple, set, frozenset, np.ndarray)
 
 
+def _check_name(value, what):
+    """Labels and group names are strings or numbers (hashable scalars)."""
+    if not isinstance(value, (str, Number, np.generic)):
+        raise ValueError(
+            f"groups: each {what} must be a string or a number, got "
+            f"{type(value).__name__} {value!r}"
+        )
+
+
 def _label_to_group(groups):
     """Normalise ``groups`` to a dict ``{label: group}`` (explicit labels only)."""
     if groups is None:
@@ -36,6 +46,9 @@ def _label_to_group(groups):
     values = list(groups.values())
     is_collection = [isinstance(v, _LABEL_COLLECTIONS) for v in values]
     if not any(is_collection):
+        for label, group in groups.items():
+            _check_name(label, "label")
+            _check_name(group, f"group of label {label!r}")
         return dict(groups)
     if not all(is_collection):
         raise ValueError(
@@ -44,12 +57,14 @@ def _label_to_group(groups):
         )
     mapping = {}
     for group, labels in groups.items():
+        _check_name(group, "group")
         if isinstance(labels, np.ndarray):
             labels = labels.ravel().tolist()
         labels = list(labels)
         if not labels:
             raise ValueError(f"group {group!r} lists no labels")
         for label in labels:
+            _check_name(label, f"label of group {group!r}")
             if label in mapping and mapping[label] != group:
                 raise ValueError(
                     f"label {label!r} is in two groups, {mapping[label]!r} and "

@@ -458,3 +458,23 @@ def test_two_step_on_imbalanced_dales_objects(dales_features):
         >= np.mean(_to_groups(one) == _to_groups(y)) - 0.03
     )
     assert np.mean(two == y) >= np.mean(one == y) - 0.05
+
+
+# ------------------------------------------------------------------ bad input
+
+
+@pytest.mark.parametrize(
+    ("groups", "message"),
+    [
+        # were TypeError: unhashable type, from deep in the grouping
+        ({"ab": [["a"], "b"]}, "label of group 'ab' must be a string or a number"),
+        ({"ab": {"a": 1}}, "group of label 'ab' must be a string or a number"),
+        # was accepted: a group named None
+        ({"a": None, "b": None}, "got NoneType None"),
+        ({("a", "b"): ["a", "b"]}, "each group must be a string or a number"),
+    ],
+)
+def test_groups_of_unusable_values_raise(groups, message):
+    X, y = _oracle_data()
+    with pytest.raises(ValueError, match=message):
+        _oracle_model().set_params(groups=groups).fit(X, y)
