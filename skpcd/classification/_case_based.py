@@ -248,6 +248,10 @@ class CaseBasedClassifier(ClassifierMixin, BaseEstimator):
     for a segment without normals) has ``S_a = 0`` with every case. NaN or
     infinite values and negative volumes raise a ValueError.
 
+    *One class.* A library of one class is allowed: with a ``threshold``
+    each segment is that class or ``unknown_label_`` (is it a lamp post or
+    something else?); without one, always that class.
+
     *Scores.* :meth:`class_similarity` is each class's best similarity;
     :meth:`decision_function` is the same, or for two classes the second
     minus the first, as scikit-learn expects. They are not probabilities:

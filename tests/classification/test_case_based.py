@@ -412,3 +412,14 @@ def test_predictions_do_not_depend_on_the_order_of_the_cases(seed, n, threshold)
     s2, i2 = shuffled.retrieve(Q, n_cases=n)
     assert_array_equal(s1, s2)
     assert_array_equal(np.sort(perm[i2], axis=1), np.sort(i1, axis=1))
+
+
+def test_one_class_library_answers_the_class_or_unknown():
+    X = _cases(12, seed=10)[:, 1:]
+    model = CaseBasedClassifier(threshold=0.9).fit(X, ["lamp"] * 12)
+    assert_array_equal(model.classes_, ["lamp"])
+    Q = np.vstack([X[5:7], -X[5:7]])  # two known cases, two anti-correlated
+    assert model.predict(Q).tolist() == ["lamp", "lamp", "unknown", "unknown"]
+    assert model.decision_function(Q).shape == (4, 1)
+    always = CaseBasedClassifier(threshold=None).fit(X, ["lamp"] * 12)
+    assert always.predict(Q).tolist() == ["lamp"] * 4
