@@ -119,10 +119,15 @@ def _cmd_evaluate(args):
         )
     clouds, y, source = _load_labelled(args)
     classes, counts = np.unique(y, return_counts=True)
+    if len(classes) < 2:
+        raise SystemExit(
+            f"skpcd evaluate: every segment is labelled {str(classes[0])!r}; "
+            "cross-validating needs at least 2 classes"
+        )
     if counts.min() < args.folds:
         raise SystemExit(
-            f"skpcd evaluate: class {classes[counts.argmin()]!r} has {counts.min()} "
-            f"segment(s), fewer than --folds {args.folds}"
+            f"skpcd evaluate: class {str(classes[counts.argmin()])!r} has "
+            f"{counts.min()} segment(s), fewer than --folds {args.folds}"
         )
     print(f"data      {source}: {len(clouds)} segments, {len(classes)} classes")
     print(f"pipeline  {args.pipeline}: {PIPELINES[args.pipeline]}")
@@ -220,6 +225,12 @@ def _cmd_fit(args):
     out = _check_output_place(_check_output(args.output, args.overwrite, "fit"), "fit")
     clouds, y, source = _load_labelled(args)
     classes, counts = np.unique(y, return_counts=True)
+    if len(classes) < 2 and args.pipeline == "default":
+        raise SystemExit(
+            f"skpcd fit: every segment is labelled {str(classes[0])!r}, so the "
+            "default pipeline would give that label to everything; label at least 2 "
+            "classes (--pipeline case-based accepts one: that class or unknown)"
+        )
     print(f"data      {source}: {len(clouds)} segments, {len(classes)} classes")
     model = make_named_pipeline(
         args.pipeline, random_state=args.random_state, n_jobs=args.n_jobs

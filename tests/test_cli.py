@@ -371,3 +371,26 @@ def test_evaluate_needs_two_folds_and_a_repeat(tmp_path, options, capsys):
 def test_fit_without_labels_names_the_fit_command(tmp_path):
     with pytest.raises(SystemExit, match=r"^skpcd fit: .* has no labels.csv"):
         main(["fit", str(tmp_path), "-o", str(tmp_path / "m.joblib")])
+
+
+def test_one_class_is_refused_where_it_means_nothing(tmp_path, capsys):
+    # was: "accuracy 1.0000" from evaluate, and a default model labelling
+    # every segment with the one class
+    from skpcd.datasets import make_urban_objects
+
+    clouds, _ = make_urban_objects(n_per_class=1, random_state=0)
+    for i, c in enumerate(clouds):
+        write_point_cloud(tmp_path / f"{i}.xyz", c)
+    (tmp_path / "labels.csv").write_text(
+        "\n".join(f"{i}.xyz,tree" for i in range(len(clouds)))
+    )
+    with pytest.raises(SystemExit, match="every segment is labelled 'tree'"):
+        main(["evaluate", str(tmp_path), "--folds", "2", "--quiet"])
+    model = tmp_path / "m.joblib"
+    with pytest.raises(SystemExit, match="label at least 2 classes"):
+        main(["fit", str(tmp_path), "-o", str(model), "--quiet"])
+    assert not model.exists()
+    # a case-based library of one class answers it or "unknown"
+    args = ["fit", str(tmp_path), "-o", str(model), "--pipeline", "case-based"]
+    assert main([*args, "--quiet"]) == 0
+    assert "1 classes" in capsys.readouterr().out
