@@ -219,10 +219,26 @@ def _check_output_place(out, command):
     return out
 
 
+def _check_not_an_input(out, command, inputs):
+    """Refuse an output that is one of the files read (even with --overwrite)."""
+    target = out.resolve()
+    for path in inputs:
+        if path is not None and Path(path).resolve() == target:
+            raise SystemExit(f"skpcd {command}: the output {out} is an input file")
+
+
+def _segment_files(folder, names):
+    """The files of ``names`` when FOLDER is a folder (not a glob)."""
+    return [Path(folder) / n for n in names] if Path(folder).is_dir() else []
+
+
 def _cmd_fit(args):
     from skpcd.io import save_model
 
     out = _check_output_place(_check_output(args.output, args.overwrite, "fit"), "fit")
+    if args.folder is not None:
+        labels = args.labels or Path(args.folder) / "labels.csv"
+        _check_not_an_input(out, "fit", [labels])
     clouds, y, source = _load_labelled(args)
     classes, counts = np.unique(y, return_counts=True)
     if len(classes) < 2 and args.pipeline == "default":
@@ -274,8 +290,7 @@ def _cmd_predict(args):
 
     out = _check_output(args.output, args.overwrite, "predict")
     _check_output_place(out, "predict")
-    if out.resolve() == Path(args.model).resolve():
-        raise SystemExit(f"skpcd predict: the output {out} is the model file")
+    _check_not_an_input(out, "predict", [args.model])
     model = load_model(args.model)
     if not hasattr(model, "predict"):
         raise SystemExit(
@@ -283,6 +298,7 @@ def _cmd_predict(args):
             "fitted model; write one with skpcd fit"
         )
     clouds, _, names = read_segments(args.folder, verbose=not args.quiet)
+    _check_not_an_input(out, "predict", _segment_files(args.folder, names))
     try:
         pred = np.asarray(model.predict(clouds))
     except ValueError as exc:  # e.g. a model of 2-D features, not of clouds
@@ -346,6 +362,7 @@ def _cmd_describe(args):
     if labels is None and (Path(args.folder) / "labels.csv").is_file():
         labels = Path(args.folder) / "labels.csv"
     clouds, y, names = read_segments(args.folder, labels, verbose=not args.quiet)
+    _check_not_an_input(out, "describe", [labels, *_segment_files(args.folder, names)])
     arrays = {"names": np.asarray(names)}
     if y is not None:
         arrays["labels"] = np.asarray(y)

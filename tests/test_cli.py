@@ -313,7 +313,7 @@ def test_predict_never_writes_over_its_model(tmp_path):
     _labelled_folder(tmp_path / "seg", n_per_class=1)
     model = tmp_path / "model.joblib"
     model.write_text("precious")
-    with pytest.raises(SystemExit, match="is the model file"):
+    with pytest.raises(SystemExit, match="is an input file"):
         main(["predict", str(model), str(tmp_path / "seg"), "-o",
               str(tmp_path / "." / "model.joblib"), "--overwrite"])  # fmt: skip
     assert model.read_text() == "precious"
@@ -394,3 +394,29 @@ def test_one_class_is_refused_where_it_means_nothing(tmp_path, capsys):
     args = ["fit", str(tmp_path), "-o", str(model), "--pipeline", "case-based"]
     assert main([*args, "--quiet"]) == 0
     assert "1 classes" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("command", ["fit", "describe", "predict"])
+def test_outputs_never_replace_the_inputs_even_with_overwrite(tmp_path, command):
+    # was: labels.csv replaced by the model (fit), a segment file replaced
+    # by the predictions or the descriptors
+    seg = tmp_path / "seg"
+    _labelled_folder(seg, n_per_class=1)
+    model = tmp_path / "model.joblib"
+    model.write_text("never read")
+    first = [str(model)] if command == "predict" else []
+    targets = [seg / "labels.csv"] if command != "predict" else []
+    if command != "fit":
+        targets.append(seg / "000.xyz")
+    for out in targets:
+        before = out.read_bytes()
+        argv = [command, *first, str(seg), "-o", str(out), "--overwrite", "--quiet"]
+        if command == "predict":  # the model is checked after the segments
+            from sklearn.dummy import DummyClassifier
+
+            from skpcd.io import save_model
+
+            save_model(DummyClassifier().fit([[0]], ["a"]), model, overwrite=True)
+        with pytest.raises(SystemExit, match="is an input file"):
+            main(argv)
+        assert out.read_bytes() == before
