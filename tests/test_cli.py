@@ -420,3 +420,28 @@ def test_outputs_never_replace_the_inputs_even_with_overwrite(tmp_path, command)
         with pytest.raises(SystemExit, match="is an input file"):
             main(argv)
         assert out.read_bytes() == before
+
+
+@pytest.mark.parametrize("command", ["fit", "describe", "predict", "evaluate"])
+def test_an_unreadable_segment_is_a_clean_error_naming_it(tmp_path, capsys, command):
+    seg = tmp_path / "seg"
+    _labelled_folder(seg, n_per_class=1)
+    (seg / "002.xyz").write_text("1 2\n3 4\n")  # two columns: not a cloud
+    model = tmp_path / "model.joblib"
+    if command == "predict":
+        from sklearn.dummy import DummyClassifier
+
+        from skpcd.io import save_model
+
+        save_model(DummyClassifier().fit([[0]], ["a"]), model)
+    out = tmp_path / "out"
+    argv = {
+        "fit": ["fit", str(seg), "-o", str(out)],
+        "describe": ["describe", str(seg), "-o", str(out)],
+        "predict": ["predict", str(model), str(seg), "-o", str(out)],
+        "evaluate": ["evaluate", str(seg), "--folds", "2"],
+    }[command]
+    assert main([*argv, "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert f"skpcd {command}: error: " in err and "002.xyz" in err
+    assert not out.exists()
