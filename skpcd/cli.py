@@ -535,8 +535,11 @@ def _cmd_identify(args):
     from skpcd.io import load_model, write_point_cloud
 
     out = _check_output(args.output, args.overwrite, "identify")
+    _check_output_place(out, "identify")
+    _check_not_an_input(out, "identify", [args.scene, args.model])
     legend = out.with_name(f"{out.stem}_classes.csv")
     _check_output(legend, args.overwrite, "identify")
+    _check_not_an_input(legend, "identify", [args.scene, args.model])
     model = load_model(args.model)
     points, _, result = _segment_file(args, "identify")
     n = result.n_segments

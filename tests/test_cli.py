@@ -445,3 +445,32 @@ def test_an_unreadable_segment_is_a_clean_error_naming_it(tmp_path, capsys, comm
     err = capsys.readouterr().err
     assert f"skpcd {command}: error: " in err and "002.xyz" in err
     assert not out.exists()
+
+
+def test_identify_refuses_bad_output_places_before_any_work(tmp_path, capsys):
+    scene = tmp_path / "scene.xyz"
+    np.savetxt(scene, np.random.default_rng(0).uniform(0, 10, (50, 3)))
+    original = scene.read_bytes()
+    model = tmp_path / "model.joblib"
+    model.write_bytes(b"not read: the output is refused first")
+    cases = {
+        str(tmp_path / "missing" / "out.ply"): "does not exist",
+        str(tmp_path): "is a folder",
+        str(scene): "is an input file",
+    }
+    for out, message in cases.items():
+        with pytest.raises(SystemExit, match=message):
+            main(
+                [
+                    "identify",
+                    str(scene),
+                    "--model",
+                    str(model),
+                    "-o",
+                    out,
+                    "--overwrite",
+                    "--quiet",
+                ]
+            )
+    assert scene.read_bytes() == original
+    assert model.read_bytes() == b"not read: the output is refused first"
