@@ -2,8 +2,15 @@
 
 import os
 import socket
+from pathlib import Path
 
 import skpcd
+
+# The gallery reads the real DALES objects through skpcd.datasets.load_dales_objects,
+# which looks at SKPCD_DALES_DIR; beside a checkout they sit in ../shared/data.
+_DALES = Path(__file__).resolve().parents[2] / "shared" / "data" / "dales_objects"
+if "SKPCD_DALES_DIR" not in os.environ and (_DALES / "labels.csv").is_file():
+    os.environ["SKPCD_DALES_DIR"] = str(_DALES)
 
 project = "skpcd"
 author = "skpcd developers"

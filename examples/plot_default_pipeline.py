@@ -8,23 +8,17 @@ classifies it with a random forest. This is what ``skpcd evaluate`` runs; here w
 cross-validate it on the DALES objects and draw the confusion matrix.
 """
 
-import os
-from pathlib import Path
-
 import matplotlib.pyplot as plt
 import numpy as np
 from sklearn.metrics import ConfusionMatrixDisplay, classification_report
 from sklearn.model_selection import StratifiedKFold, cross_val_predict
 
 from skpcd.classification import make_default_pipeline
-from skpcd.datasets import make_urban_objects
-from skpcd.io import read_segments
+from skpcd.datasets import load_dales_objects
 
-folder = Path(os.environ.get("SKPCD_DALES_DIR", "../../shared/data/dales_objects"))
-if (folder / "labels.csv").is_file():
-    clouds, labels, _ = read_segments(folder, folder / "labels.csv")
-else:  # no real data here: the embedded synthetic objects
-    clouds, labels = make_urban_objects(n_per_class=40, random_state=0)
+# The real DALES objects where SKPCD_DALES_DIR points to them, else synthetic stand-ins.
+objects = load_dales_objects(synthetic_if_missing=True, n_per_class=40)
+clouds, labels = objects.data, objects.target
 
 cv = StratifiedKFold(n_splits=5, shuffle=True, random_state=0)
 predicted = cross_val_predict(make_default_pipeline(n_jobs=2), clouds, labels, cv=cv)

@@ -17,9 +17,6 @@ Wang et al., 2023, and the best pipeline) come from
 (:ref:`identification`).
 """
 
-import os
-from pathlib import Path
-
 import matplotlib.pyplot as plt
 import numpy as np
 from sklearn.ensemble import RandomForestClassifier
@@ -30,16 +27,13 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.svm import SVC
 
 from skpcd.classification import TwoStepClassifier
-from skpcd.datasets import make_urban_objects
+from skpcd.datasets import load_dales_objects
 from skpcd.encoding import BagOfFeatures
 from skpcd.features import PFHTransformer, ShapeFeatures
-from skpcd.io import read_segments
 
-folder = Path(os.environ.get("SKPCD_DALES_DIR", "../../shared/data/dales_objects"))
-if (folder / "labels.csv").is_file():
-    clouds, labels, _ = read_segments(folder, folder / "labels.csv")
-else:  # no real data here: the embedded synthetic objects
-    clouds, labels = make_urban_objects(n_per_class=30, random_state=0)
+# The real DALES objects where SKPCD_DALES_DIR points to them, else synthetic stand-ins.
+objects = load_dales_objects(synthetic_if_missing=True, n_per_class=30)
+clouds, labels = objects.data, objects.target
 
 all_clouds, all_labels = clouds, labels
 rng = np.random.RandomState(0)

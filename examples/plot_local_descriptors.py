@@ -8,21 +8,15 @@ trees. Here: one DALES object per class, its points coloured by the dominant bin
 the mean histograms side by side.
 """
 
-import os
-from pathlib import Path
-
 import matplotlib.pyplot as plt
 import numpy as np
 
-from skpcd.datasets import make_urban_objects
+from skpcd.datasets import load_dales_objects
 from skpcd.features import FPFHTransformer, PFHTransformer
-from skpcd.io import read_segments
 
-folder = Path(os.environ.get("SKPCD_DALES_DIR", "../../shared/data/dales_objects"))
-if (folder / "labels.csv").is_file():
-    clouds, labels, _ = read_segments(folder, folder / "labels.csv")
-else:  # no real data here: the embedded synthetic objects
-    clouds, labels = make_urban_objects(n_per_class=10, random_state=0)
+# The real DALES objects where SKPCD_DALES_DIR points to them, else synthetic stand-ins.
+objects = load_dales_objects(synthetic_if_missing=True, n_per_class=10)
+clouds, labels = objects.data, objects.target
 
 classes = sorted(set(labels.tolist()))
 picked = [next(c for c, y in zip(clouds, labels) if y == k) for k in classes]

@@ -1,30 +1,23 @@
 """
-Read a folder of segments and look at them
-==========================================
+Load the DALES objects and look at them
+=======================================
 
-:func:`skpcd.io.read_segments` reads one file per object and its labels. Here we read
-the DALES objects, count them per class, and draw one object of each class.
+:func:`skpcd.datasets.load_dales_objects` reads the DALES objects (one file per object
+and a ``labels.csv``) with :func:`skpcd.io.read_segments`, which reads any folder of
+labelled segments. Here we count them per class and draw one object of each class.
 """
-
-import os
-from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
 
-from skpcd.datasets import make_urban_objects
-from skpcd.io import read_segments
+from skpcd.datasets import load_dales_objects
 
-folder = Path(os.environ.get("SKPCD_DALES_DIR", "../../shared/data/dales_objects"))
-if (folder / "labels.csv").is_file():
-    clouds, labels, names = read_segments(folder, folder / "labels.csv")
-    source = "DALES objects"
-else:  # no real data here: the embedded synthetic objects
-    clouds, labels = make_urban_objects(n_per_class=40, random_state=0)
-    source = "synthetic urban objects"
+# The real DALES objects where SKPCD_DALES_DIR points to them, else synthetic stand-ins.
+objects = load_dales_objects(synthetic_if_missing=True, n_per_class=40)
+clouds, labels = objects.data, objects.target
 
 classes, counts = np.unique(labels, return_counts=True)
-print(source)
+print(objects.source)
 for c, n in zip(classes, counts):
     sizes = [len(x) for x, y in zip(clouds, labels) if y == c]
     print(f"{c:>10}: {n} objects, median {int(np.median(sizes))} points")
@@ -40,5 +33,5 @@ for i, c in enumerate(classes):
     ax.set_title(c)
     ax.set_axis_off()
     ax.set_box_aspect(np.ptp(cloud, axis=0) + 1e-9)
-fig.suptitle(source)
+fig.suptitle(objects.source)
 plt.show()

@@ -1,12 +1,15 @@
 """Datasets: synthetic generators and the embedded default objects."""
 
+from skpcd.datasets._dales import DALES_ENV, load_dales_objects
 from skpcd.datasets._primitives import PRIMITIVES, make_primitives
 from skpcd.datasets._random import make_point_clouds
 from skpcd.datasets._urban import URBAN_CLASSES, make_urban_objects
 
 __all__ = [
+    "DALES_ENV",
     "PRIMITIVES",
     "URBAN_CLASSES",
+    "load_dales_objects",
     "make_point_clouds",
     "make_primitives",
     "make_urban_objects",

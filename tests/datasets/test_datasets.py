@@ -73,3 +73,35 @@ def test_make_primitives_shapes_sizes_and_seed():
         make_primitives(1, shapes=["torus"])
     with pytest.raises(ValueError, match="n_per_shape"):
         make_primitives(0)
+
+
+def test_load_dales_objects_reads_the_folder(dales_dir, monkeypatch):
+    from skpcd.datasets import load_dales_objects
+
+    monkeypatch.delenv("SKPCD_DALES_DIR", raising=False)
+    objects = load_dales_objects(dales_dir)
+    assert objects.source == "DALES objects" and objects.folder == dales_dir
+    assert len(objects.data) == len(objects.target) == len(objects.filenames) > 300
+    assert set(objects.target) == set(URBAN_CLASSES)
+    assert all(c.ndim == 2 and c.shape[1] == 3 for c in objects.data)
+    # the environment variable names the same folder
+    monkeypatch.setenv("SKPCD_DALES_DIR", str(dales_dir))
+    clouds, labels = load_dales_objects(return_X_y=True)
+    assert (labels == objects.target).all()
+    assert all(np.array_equal(a, b) for a, b in zip(clouds, objects.data))
+
+
+def test_load_dales_objects_missing(tmp_path, monkeypatch):
+    from skpcd.datasets import load_dales_objects
+    from skpcd.exceptions import MissingFileError
+
+    monkeypatch.delenv("SKPCD_DALES_DIR", raising=False)
+    with pytest.raises(MissingFileError, match="SKPCD_DALES_DIR"):
+        load_dales_objects()
+    with pytest.raises(MissingFileError, match=r"labels\.csv"):
+        load_dales_objects(tmp_path)
+    objects = load_dales_objects(tmp_path, synthetic_if_missing=True, n_per_class=3)
+    assert objects.source == "synthetic urban objects" and objects.folder is None
+    expected, labels = make_urban_objects(n_per_class=3, random_state=0)
+    assert (objects.target == labels).all()
+    assert all(np.array_equal(a, b) for a, b in zip(objects.data, expected))
