@@ -6,11 +6,15 @@ from skpcd.io._api import (
     read_segments,
     write_point_cloud,
 )
+from skpcd.io._las import LasExtent, iter_points, read_las_extent
 from skpcd.io._model import load_model, save_model
 
 __all__ = [
     "SUPPORTED_EXTENSIONS",
+    "LasExtent",
+    "iter_points",
     "load_model",
+    "read_las_extent",
     "read_point_cloud",
     "read_segments",
     "save_model",

@@ -24,10 +24,17 @@ other field becomes extra bytes (``(n, c)`` fields as ``name_0 ...
 name_{c-1}``).
 """
 
+import os
+import typing
+from numbers import Integral
+from pathlib import Path
+
 import numpy as np
 
-from skpcd.exceptions import PointCloudFileError
+from skpcd.exceptions import MissingFileError, PointCloudFileError
 from skpcd.io._ply import _group
+
+__all__ = ["LasExtent", "iter_points", "read_las_extent"]
 
 _MISSING = "reading .las/.laz files needs laspy: pip install 'skpcd[las]'"
 _SCALE = 1e-4
@@ -40,6 +47,202 @@ def _laspy():
     except ImportError as exc:
         raise ImportError(_MISSING) from exc
     return laspy
+
+
+def _problem(exc):
+    problem = str(exc) or type(exc).__name__
+    if "LazBackend" in problem:
+        problem += " (pip install lazrs)"
+    return problem
+
+
+def _check_file(path):
+    path = Path(os.fspath(path))
+    if path.suffix.lower() not in (".las", ".laz"):
+        raise PointCloudFileError(
+            path, f"not a LAS/LAZ file (extension {path.suffix or '(none)'!r})."
+        )
+    if not path.is_file():
+        what = "is a directory, not a file" if path.is_dir() else "no such file"
+        raise MissingFileError(path, what)
+    return path
+
+
+def _open(laspy, path):
+    try:
+        return laspy.open(str(path))
+    except Exception as exc:
+        raise PointCloudFileError(
+            path, f"cannot read as LAS/LAZ: {_problem(exc)}"
+        ) from exc
+
+
+class LasExtent(typing.NamedTuple):
+    """What :func:`read_las_extent` returns (a named tuple).
+
+    Attributes
+    ----------
+    n_points : int
+        Number of points the header declares.
+    mins : ndarray of shape (3,)
+        Lowest x, y, z the header declares.
+    maxs : ndarray of shape (3,)
+        Highest x, y, z the header declares.
+    """
+
+    n_points: int
+    mins: np.ndarray
+    maxs: np.ndarray
+
+
+def read_las_extent(path):
+    """Point count and bounding box of a LAS/LAZ file, from its header only.
+
+    Nothing but the header is read, so this is instant whatever the size of
+    the file. The bounds are those the writer stored (laspy and most tools
+    store the exact extent of the points).
+
+    Parameters
+    ----------
+    path : str or path-like
+        A ``.las`` or ``.laz`` file.
+
+    Returns
+    -------
+    extent : LasExtent
+        Named tuple ``(n_points, mins, maxs)``.
+
+    Raises
+    ------
+    ImportError
+        If laspy is not installed.
+    MissingFileError
+        If the file does not exist.
+    PointCloudFileError
+        If the file is not a readable LAS/LAZ file.
+
+    See Also
+    --------
+    iter_points : Read the points chunk by chunk.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os
+    >>> from skpcd.io import read_las_extent, write_point_cloud
+    >>> path = os.path.join(tempfile.mkdtemp(), "scan.las")
+    >>> write_point_cloud(path, [[0, 0, 0], [10, 20, 3], [5, 5, 1]])
+    >>> extent = read_las_extent(path)
+    >>> extent.n_points, extent.maxs.tolist()
+    (3, [10.0, 20.0, 3.0])
+    """
+    laspy = _laspy()
+    path = _check_file(path)
+    with _open(laspy, path) as reader:
+        header = reader.header
+        return LasExtent(
+            int(header.point_count),
+            np.array(header.mins, dtype=np.float64),
+            np.array(header.maxs, dtype=np.float64),
+        )
+
+
+def iter_points(path, *, chunk_size=1_000_000, fields=None):
+    """Read a LAS/LAZ file chunk by chunk, in file order.
+
+    Only one chunk is in memory at a time (laspy's chunk iterator), so a scan
+    larger than memory can be streamed: concatenated, the chunks are exactly
+    what :func:`read_point_cloud` returns for the whole file (with
+    ``nonfinite="keep"``; LAS coordinates are always finite).
+
+    Parameters
+    ----------
+    path : str or path-like
+        A ``.las`` or ``.laz`` file.
+    chunk_size : int, default=1_000_000
+        Points per chunk (the last chunk may be shorter). About 24 bytes per
+        point for xyz, plus the requested fields.
+    fields : None or list of str, default=None
+        LAS dimensions to return besides xyz, by laspy's names
+        (``"intensity"``, ``"classification"``, ``"gps_time"``, an extra
+        dimension...). With None only the points are yielded.
+
+    Yields
+    ------
+    points : ndarray of shape (n_chunk, 3), dtype float64
+        The scaled coordinates of the next ``chunk_size`` points.
+    extras : dict of str to ndarray
+        Only when ``fields`` is given (the chunk is then a tuple
+        ``(points, extras)``): each requested dimension for those points.
+
+    Raises
+    ------
+    ImportError
+        If laspy is not installed.
+    ValueError
+        If ``chunk_size`` is not a positive integer.
+    MissingFileError
+        If the file does not exist.
+    PointCloudFileError
+        If the file is not a readable LAS/LAZ file, is truncated, or lacks a
+        requested field. The error may come after some chunks were yielded
+        (a file truncated in the middle).
+
+    See Also
+    --------
+    read_las_extent : The point count and bounds, from the header.
+    read_point_cloud : Read a whole file.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os
+    >>> from skpcd.io import iter_points, write_point_cloud
+    >>> path = os.path.join(tempfile.mkdtemp(), "scan.las")
+    >>> write_point_cloud(path, np.arange(30.0).reshape(10, 3))
+    >>> [len(chunk) for chunk in iter_points(path, chunk_size=4)]
+    [4, 4, 2]
+    """
+    if (
+        isinstance(chunk_size, bool)
+        or not isinstance(chunk_size, Integral)
+        or chunk_size < 1
+    ):
+        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    if fields is not None:
+        fields = [fields] if isinstance(fields, str) else list(fields)
+    laspy = _laspy()
+    path = _check_file(path)
+    return _iter_points(laspy, path, int(chunk_size), fields)
+
+
+def _iter_points(laspy, path, chunk_size, fields):
+    with _open(laspy, path) as reader:
+        available = set(reader.header.point_format.dimension_names)
+        missing = [f for f in fields or () if f not in available or f in "XYZ"]
+        if missing:
+            raise PointCloudFileError(
+                path,
+                f"no field {missing[0]!r}; the file has: "
+                + ", ".join(n for n in available if n not in ("X", "Y", "Z")),
+            )
+        chunks = reader.chunk_iterator(chunk_size)
+        while True:
+            try:
+                chunk = next(chunks)
+            except StopIteration:
+                return
+            except Exception as exc:
+                raise PointCloudFileError(
+                    path, f"cannot read as LAS/LAZ: {_problem(exc)}"
+                ) from exc
+            if len(chunk) == 0:
+                return
+            xyz = np.empty((len(chunk), 3))
+            for j, c in enumerate("xyz"):
+                xyz[:, j] = chunk[c]
+            if fields is None:
+                yield xyz
+            else:
+                yield xyz, {f: np.array(chunk[f]) for f in fields}
 
 
 def read(path):
@@ -70,10 +273,9 @@ def read(path):
     try:
         las = laspy.read(str(path))
     except Exception as exc:
-        problem = str(exc) or type(exc).__name__
-        if "LazBackend" in problem:
-            problem += " (pip install lazrs)"
-        raise PointCloudFileError(path, f"cannot read as LAS/LAZ: {problem}") from exc
+        raise PointCloudFileError(
+            path, f"cannot read as LAS/LAZ: {_problem(exc)}"
+        ) from exc
     fields = {c: np.asarray(getattr(las, c), dtype=np.float64) for c in "xyz"}
     for name in las.point_format.dimension_names:
         if name not in ("X", "Y", "Z"):

@@ -5,6 +5,7 @@ Also :func:`make_scene`, which places real objects on a synthetic terrain
 the objects it should recover.
 """
 
+import os
 import typing
 from numbers import Integral, Real
 
@@ -50,7 +51,7 @@ class SceneSegmentation(typing.NamedTuple):
 
 @validate_params(
     {
-        "points": ["array-like"],
+        "points": ["array-like", str, os.PathLike],
         "ground": [StrOptions(set(GROUND_PRESETS)), GroundFilter, None],
         "method": [StrOptions({"dbscan", "euclidean"})],
         "eps": [Interval(Real, 0, None, closed="neither"), None],
@@ -59,6 +60,9 @@ class SceneSegmentation(typing.NamedTuple):
         "max_cluster_size": [Interval(Integral, 1, None, closed="left"), None],
         "random_state": ["random_state"],
         "n_jobs": [Integral, None],
+        "tile_size": [Interval(Real, 0, None, closed="neither"), None],
+        "tile_buffer": [Interval(Real, 0, None, closed="left"), None],
+        "temp_folder": [str, os.PathLike, None],
     },
     prefer_skip_nested_validation=True,
 )
@@ -73,6 +77,9 @@ def segment_scene(
     max_cluster_size=None,
     random_state=0,
     n_jobs=None,
+    tile_size=None,
+    tile_buffer=None,
+    temp_folder=None,
 ):
     """Cut a LiDAR scene into object segments.
 
@@ -128,15 +135,42 @@ def segment_scene(
     >>> seg.n_segments, int(seg.ground.sum()), np.bincount(seg.labels[9000:]).tolist()
     (2, 9000, [800, 800])
     """
-    xyz = check_scene(points)
-    if ground is None:
-        is_ground = np.zeros(len(xyz), dtype=bool)
-    else:
+    filt = None
+    if ground is not None:
         filt = (
             GroundFilter(**GROUND_PRESETS[ground])
             if isinstance(ground, str)
             else clone(ground)
         )
+    if tile_size is not None:
+        from skpcd.segmentation._tiling import segment_tiled
+
+        if ground is not None:
+            filt._validate_params()
+        return SceneSegmentation(
+            *segment_tiled(
+                points,
+                tile_size=float(tile_size),
+                tile_buffer=tile_buffer,
+                ground=filt,
+                method=method,
+                eps=None if eps is None else float(eps),
+                min_samples=min_samples,
+                min_cluster_size=min_cluster_size,
+                max_cluster_size=max_cluster_size,
+                random_state=random_state,
+                n_jobs=n_jobs,
+                temp_folder=temp_folder,
+            )
+        )
+    if isinstance(points, (str, os.PathLike)):
+        from skpcd.io import read_point_cloud
+
+        points = read_point_cloud(points)
+    xyz = check_scene(points)
+    if filt is None:
+        is_ground = np.zeros(len(xyz), dtype=bool)
+    else:
         is_ground = filt.fit_predict(xyz)
     rest = np.flatnonzero(~is_ground)
     labels = np.full(len(xyz), -1, dtype=np.int64)

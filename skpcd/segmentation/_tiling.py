@@ -1,0 +1,719 @@
+"""Out-of-core scenes: square tiles with an overlap buffer, spilled to disk.
+
+A scan larger than memory is read chunk by chunk (:func:`skpcd.io.iter_points`)
+and each chunk is routed to the tiles whose buffered square it falls in, by
+appending it to one temporary file per tile. A tile can then be loaded on
+its own, with its buffer, and processed; memory is bounded by the largest
+buffered tile, not by the scan.
+
+:func:`segment_tiled` is the tiled :func:`~skpcd.segmentation.segment_scene`:
+see its docstring for why the tiled answer is the untiled one.
+"""
+
+import math
+import os
+import shutil
+import tempfile
+import typing
+from numbers import Integral, Real
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+__all__ = ["TileGrid", "TiledScene", "tile_scene"]
+
+# One record per (point, buffered tile): coordinates and the point's index in
+# the scan.
+_RECORD = np.dtype([("xyz", np.float64, (3,)), ("index", np.int64)])
+
+
+class TileGrid(typing.NamedTuple):
+    """Square tiles over the XY extent of a scene, with an overlap buffer.
+
+    Tile ``t`` is row ``t // shape[0]``, column ``t % shape[0]``: its core
+    square spans ``origin[0] + size * col`` to ``origin[0] + size * (col +
+    1)`` in x, and likewise in y with the row. The core squares partition
+    the plane: every point has exactly one *owner* tile (points beyond the
+    grid belong to the nearest edge tile). The *buffered* tile is its core
+    square grown by ``buffer`` on every side (a square, not a disk), so a
+    point can be in the buffers of up to four tiles when ``buffer < size``.
+
+    Build one with :meth:`cover`.
+
+    Attributes
+    ----------
+    origin : tuple of float
+        x and y of the corner of tile 0.
+    size : float
+        Side of the core squares.
+    shape : tuple of int
+        Tiles along x and along y.
+    buffer : float
+        Overlap added on every side of the core squares.
+    """
+
+    origin: tuple
+    size: float
+    shape: tuple
+    buffer: float
+
+    @classmethod
+    def cover(cls, mins, maxs, size, buffer=0.0):
+        """The grid of ``size`` squares covering ``mins`` to ``maxs`` in XY.
+
+        Parameters
+        ----------
+        mins, maxs : array-like of shape (2+,)
+            Lowest and highest x and y of the scene (z is ignored).
+        size : float
+            Side of the tiles, > 0.
+        buffer : float, default=0.0
+            Overlap, >= 0.
+
+        Returns
+        -------
+        grid : TileGrid
+            Tiles starting at ``mins``, enough of them to reach ``maxs``.
+
+        Examples
+        --------
+        >>> from skpcd.segmentation._tiling import TileGrid
+        >>> grid = TileGrid.cover([0, 0], [250, 90], 100, buffer=5)
+        >>> grid.shape, grid.n_tiles
+        ((3, 1), 3)
+        """
+        if not (isinstance(size, Real) and math.isfinite(size) and size > 0):
+            raise ValueError(f"tile size must be a positive number, got {size!r}")
+        if not (isinstance(buffer, Real) and math.isfinite(buffer) and buffer >= 0):
+            raise ValueError(f"tile buffer must be a number >= 0, got {buffer!r}")
+        lo = np.asarray(mins, dtype=np.float64)[:2]
+        hi = np.asarray(maxs, dtype=np.float64)[:2]
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            raise ValueError("the scene bounds must be finite")
+        n = np.maximum(1, np.ceil((hi - lo) / size)).astype(np.int64)
+        return cls(
+            (float(lo[0]), float(lo[1])),
+            float(size),
+            (int(n[0]), int(n[1])),
+            float(buffer),
+        )
+
+    @property
+    def n_tiles(self):
+        """Number of tiles."""
+        return self.shape[0] * self.shape[1]
+
+    def _cols(self, values, axis, shift=0.0):
+        n = self.shape[axis]
+        index = np.floor((values + shift - self.origin[axis]) / self.size)
+        return np.clip(index, 0, n - 1).astype(np.int64)
+
+    def owner(self, xy):
+        """The tile owning each point (the one whose core square holds it).
+
+        Parameters
+        ----------
+        xy : array-like of shape (n_points, 2+)
+            Points; columns beyond the second are ignored.
+
+        Returns
+        -------
+        tiles : ndarray of shape (n_points,), dtype int64
+            Tile index of each point.
+        """
+        xy = np.asarray(xy, dtype=np.float64)
+        return self._cols(xy[:, 1], 1) * self.shape[0] + self._cols(xy[:, 0], 0)
+
+    def core_bounds(self, tile):
+        """``(xmin, ymin, xmax, ymax)`` of a tile's core square."""
+        row, col = divmod(int(tile), self.shape[0])
+        x0 = self.origin[0] + self.size * col
+        y0 = self.origin[1] + self.size * row
+        return x0, y0, x0 + self.size, y0 + self.size
+
+    def route(self, xy):
+        """Every (point, tile) pair with the point in the buffered tile.
+
+        Parameters
+        ----------
+        xy : array-like of shape (n_points, 2+)
+            Points.
+
+        Returns
+        -------
+        rows : ndarray of shape (n_pairs,), dtype int64
+            Point of each pair, ascending within each tile.
+        tiles : ndarray of shape (n_pairs,), dtype int64
+            Tile of each pair. Pairs are sorted by tile, then by point.
+        """
+        xy = np.asarray(xy, dtype=np.float64)
+        b = self.buffer
+        lo = [self._cols(xy[:, a], a, -b) for a in (0, 1)]
+        hi = [self._cols(xy[:, a], a, b) for a in (0, 1)]
+        reach = math.ceil(2 * b / self.size) + 1
+        rows, tiles = [], []
+        every = np.arange(len(xy))
+        for dy in range(reach + 1):
+            ty = lo[1] + dy
+            in_y = ty <= hi[1]
+            for dx in range(reach + 1):
+                tx = lo[0] + dx
+                keep = in_y & (tx <= hi[0])
+                rows.append(every[keep])
+                tiles.append(ty[keep] * self.shape[0] + tx[keep])
+        rows, tiles = np.concatenate(rows), np.concatenate(tiles)
+        order = np.lexsort((rows, tiles))
+        return rows[order], tiles[order]
+
+
+class TiledScene:
+    """A scene spilled to disk, one temporary file per buffered tile.
+
+    Made by :func:`tile_scene`; use it as a context manager (or call
+    :meth:`close`) to delete the files.
+
+    Attributes
+    ----------
+    grid : TileGrid
+        The tiles.
+    folder : pathlib.Path
+        The temporary folder holding the tile files.
+    n_points : int
+        Points in the scene.
+    mins, maxs : ndarray of shape (3,)
+        Exact bounds of the points (computed while routing).
+    counts : ndarray of shape (n_tiles,), dtype int64
+        Points in each buffered tile.
+    """
+
+    def __init__(self, grid, folder, n_points, mins, maxs, counts, owned):
+        self.grid = grid
+        self.folder = Path(folder)
+        self.n_points = int(n_points)
+        self.mins = mins
+        self.maxs = maxs
+        self.counts = counts
+        self._owned = owned
+
+    def owned_counts(self):
+        """Points owned by each tile (its core square); they sum to ``n_points``.
+
+        Returns
+        -------
+        counts : ndarray of shape (n_tiles,), dtype int64
+            Owned points per tile.
+        """
+        return self._owned.copy()
+
+    def path(self, tile):
+        """The file of a tile (it may not exist when the tile is empty)."""
+        return self.folder / f"tile_{int(tile)}.bin"
+
+    def load(self, tile):
+        """The points of a buffered tile, in scan order.
+
+        Parameters
+        ----------
+        tile : int
+            Tile index.
+
+        Returns
+        -------
+        xyz : ndarray of shape (n_tile_points, 3), dtype float64
+            Points in the buffered tile.
+        index : ndarray of shape (n_tile_points,), dtype int64
+            Their indices in the scan, ascending.
+        """
+        path = self.path(tile)
+        if not path.exists():
+            return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+        records = np.fromfile(path, dtype=_RECORD)
+        return np.ascontiguousarray(records["xyz"]), records["index"].copy()
+
+    def close(self):
+        """Delete the temporary files."""
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def _is_path(source):
+    return isinstance(source, (str, os.PathLike))
+
+
+def iter_chunks(source, chunk_size):
+    """Chunks of xyz (float64, ``(n, 3)``) of a path or an array."""
+    if _is_path(source):
+        suffix = Path(os.fspath(source)).suffix.lower()
+        if suffix in (".las", ".laz"):
+            from skpcd.io import iter_points
+
+            yield from iter_points(source, chunk_size=chunk_size)
+            return
+        from skpcd.io import read_point_cloud
+
+        source = read_point_cloud(source)  # not out of core: no chunked reader
+    from skpcd.segmentation._clusters import check_scene
+
+    xyz = check_scene(source)
+    for start in range(0, len(xyz), chunk_size):
+        yield xyz[start : start + chunk_size]
+
+
+def scene_bounds(source, chunk_size):
+    """``(mins, maxs)`` of a scene for laying out tiles: the LAS header for
+    LAS/LAZ files (no pass over the points), else the points."""
+    if _is_path(source) and Path(os.fspath(source)).suffix.lower() in (".las", ".laz"):
+        from skpcd.io import read_las_extent
+
+        extent = read_las_extent(source)
+        return extent.mins, extent.maxs
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for xyz in iter_chunks(source, chunk_size):
+        if len(xyz):
+            lo = np.minimum(lo, xyz.min(axis=0))
+            hi = np.maximum(hi, xyz.max(axis=0))
+    return lo, hi
+
+
+def _check_chunk_size(chunk_size):
+    if (
+        isinstance(chunk_size, bool)
+        or not isinstance(chunk_size, Integral)
+        or chunk_size < 1
+    ):
+        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    return int(chunk_size)
+
+
+def tile_scene(
+    source, tile_size, *, buffer=0.0, chunk_size=1_000_000, temp_folder=None
+):
+    """Cut a scene into buffered square tiles spilled to temporary files.
+
+    The scene is read chunk by chunk (a LAS/LAZ file through
+    :func:`skpcd.io.iter_points`; other files are read whole) and every
+    point is appended to the file of each buffered tile holding it, so
+    memory holds one chunk at a time.
+
+    Parameters
+    ----------
+    source : str, path-like or array-like of shape (n_points, 3+)
+        A point-cloud file or the points.
+    tile_size : float
+        Side of the square tiles, in the units of the coordinates.
+    buffer : float, default=0.0
+        Overlap added on every side of each tile.
+    chunk_size : int, default=1_000_000
+        Points read at a time.
+    temp_folder : str or path-like, default=None
+        Where to create the temporary folder of tile files (the system's
+        temporary folder when None). It needs room for the points of all
+        buffered tiles: 32 bytes per point and tile.
+
+    Returns
+    -------
+    scene : TiledScene
+        The tiles; close it (or use it in a ``with`` block) to delete the
+        files.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from skpcd.segmentation._tiling import tile_scene
+    >>> points = np.random.default_rng(0).uniform(0, 100, (1000, 3))
+    >>> with tile_scene(points, 50, buffer=5) as scene:
+    ...     xyz, index = scene.load(0)
+    ...     print(scene.grid.shape, int(scene.owned_counts().sum()))
+    ...     print(bool(xyz[:, :2].max() <= 55), bool(np.all(np.diff(index) > 0)))
+    (2, 2) 1000
+    True True
+    """
+    chunk_size = _check_chunk_size(chunk_size)
+    mins, maxs = scene_bounds(source, chunk_size)
+    if not np.all(mins <= maxs):
+        raise ValueError("the scene has no points")
+    grid = TileGrid.cover(mins, maxs, tile_size, buffer)
+    folder = Path(tempfile.mkdtemp(prefix="skpcd_tiles_", dir=temp_folder))
+    counts = np.zeros(grid.n_tiles, dtype=np.int64)
+    owned = np.zeros(grid.n_tiles, dtype=np.int64)
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    start = 0
+    try:
+        for xyz in iter_chunks(source, chunk_size):
+            if not len(xyz):
+                continue
+            if not np.all(np.isfinite(xyz)):
+                raise ValueError("the scene has NaN or infinite coordinates")
+            lo = np.minimum(lo, xyz.min(axis=0))
+            hi = np.maximum(hi, xyz.max(axis=0))
+            owned += np.bincount(grid.owner(xyz), minlength=grid.n_tiles)
+            rows, tiles = grid.route(xyz)
+            records = np.empty(len(rows), dtype=_RECORD)
+            records["xyz"] = xyz[rows]
+            records["index"] = rows + start
+            bounds = np.flatnonzero(np.diff(tiles)) + 1
+            for part in np.split(np.arange(len(rows)), bounds):
+                if len(part):
+                    tile = int(tiles[part[0]])
+                    with open(folder / f"tile_{tile}.bin", "ab") as f:
+                        records[part[0] : part[-1] + 1].tofile(f)
+                    counts[tile] += len(part)
+            start += len(xyz)
+    except BaseException:
+        shutil.rmtree(folder, ignore_errors=True)
+        raise
+    if start == 0:
+        shutil.rmtree(folder, ignore_errors=True)
+        raise ValueError("the scene has no points")
+    return TiledScene(grid, folder, start, lo, hi, counts, owned)
+
+
+# --- the ground filter on a window of the scene's raster -------------------
+
+
+@njit(cache=True, nogil=True)
+def _window_minimum(xyz, x0, y0, cell, nx, ny, c0, r0, zmin):
+    """``cell_minimum`` of the whole scene's raster (origin ``x0, y0``,
+    ``nx`` x ``ny`` cells), kept for the window starting at cell ``(r0,
+    c0)``: the same cell of every point as in the whole raster."""
+    wy, wx = zmin.shape
+    for i in range(len(xyz)):
+        c = min(max(math.floor((xyz[i, 0] - x0) / cell), 0), nx - 1) - c0
+        r = min(max(math.floor((xyz[i, 1] - y0) / cell), 0), ny - 1) - r0
+        if 0 <= c < wx and 0 <= r < wy and xyz[i, 2] < zmin[r, c]:
+            zmin[r, c] = xyz[i, 2]
+
+
+@njit(cache=True, nogil=True)
+def _window_bilinear(xyz, x0, y0, cell, nx, ny, c0, r0, grid, out):
+    """``bilinear`` of the whole scene's raster, read from the window
+    ``grid`` of it starting at cell ``(r0, c0)``: the same cells and
+    weights as on the whole raster wherever they fall in the window."""
+    wy, wx = grid.shape
+    for i in range(len(xyz)):
+        u = (xyz[i, 0] - x0) / cell - 0.5
+        v = (xyz[i, 1] - y0) / cell - 0.5
+        u = min(max(u, 0.0), nx - 1.0)
+        v = min(max(v, 0.0), ny - 1.0)
+        c = min(int(u), max(nx - 2, 0))
+        r = min(int(v), max(ny - 2, 0))
+        fu = u - c if nx > 1 else 0.0
+        fv = v - r if ny > 1 else 0.0
+        c1 = min(max(min(c + 1, nx - 1) - c0, 0), wx - 1)
+        r1 = min(max(min(r + 1, ny - 1) - r0, 0), wy - 1)
+        c = min(max(c - c0, 0), wx - 1)
+        r = min(max(r - r0, 0), wy - 1)
+        top = grid[r, c] * (1.0 - fu) + grid[r, c1] * fu
+        bottom = grid[r1, c] * (1.0 - fu) + grid[r1, c1] * fu
+        out[i] = top * (1.0 - fv) + bottom * fv
+
+
+def _window_filter(base):
+    """A GroundFilter class fitted on a window of the whole scene's raster."""
+    from skpcd.segmentation._ground import GroundFilter
+
+    class _WindowGroundFilter(GroundFilter):
+        # Same parameters and steps as GroundFilter; only the raster is a
+        # window (``_raster``: scene origin, scene cells, window start and
+        # size) of the raster of the whole scene, so cells and
+        # interpolation weights are those of the untiled filter.
+
+        def _minimum_surface(self, xyz):
+            x0, y0, nx, ny, c0, r0, wx, wy = self._raster
+            zmin = np.full((wy, wx), np.inf)
+            _window_minimum(xyz, x0, y0, float(self.cell), nx, ny, c0, r0, zmin)
+            return np.array([x0 + c0 * self.cell, y0 + r0 * self.cell]), zmin
+
+        def _at(self, grid, xyz):
+            x0, y0, nx, ny, c0, r0, _, _ = self._raster
+            out = np.empty(len(xyz))
+            _window_bilinear(xyz, x0, y0, float(self.cell), nx, ny, c0, r0, grid, out)
+            return out
+
+    return _WindowGroundFilter(**base.get_params())
+
+
+def ground_reach(filt):
+    """How far (in metres) the ground filter's answer at a point depends on
+    the points around it: the largest opening (erosion then dilation, each
+    ``window`` wide) plus a few cells for the low-noise median, the slope
+    and the interpolation."""
+    radius = max(1, math.ceil(filt.window / filt.cell))
+    return (2 * radius + 4) * filt.cell
+
+
+def _ground_tile(xyz, owned, filt, raster):
+    """Ground flags of the owned points of a buffered tile."""
+    est = _window_filter(filt)
+    est._raster = raster
+    if len(xyz) == 0:
+        return np.zeros(0, dtype=bool)
+    est.fit(xyz)
+    return est.ground_[owned]
+
+
+def _cluster_tile(xyz, owned, eps, min_samples, n_jobs):
+    """DBSCAN of the non-ground points of a buffered tile: labels of the
+    owned points, and the positions and labels of the other core points."""
+    from skpcd.segmentation._clusters import grid_dbscan
+
+    labels, core = grid_dbscan(xyz, eps, min_samples, n_jobs=n_jobs)
+    shared = np.flatnonzero(core & ~owned)
+    return labels[owned], shared, labels[shared]
+
+
+# --- tiled segmentation ---------------------------------------------------
+
+
+def _backend_chosen():
+    """Whether the caller chose a joblib backend (``parallel_config``)."""
+    from joblib import parallel
+
+    config = getattr(parallel._backend, "config", None) or {}
+    return not isinstance(
+        config.get("backend", parallel.default_parallel_config["backend"]),
+        type(parallel.default_parallel_config["backend"]),
+    )
+
+
+def _map(func, jobs, n_jobs):
+    """``func(*args)`` for the argument tuples of ``jobs``, in order, lazily:
+    in this process with ``n_jobs`` threads per call unless a joblib backend
+    was chosen, then through :class:`sklearn.utils.parallel.Parallel` (on a
+    Dask cluster inside ``parallel_config(backend="dask")``), one kernel
+    thread per call."""
+    if not _backend_chosen():
+        for args in jobs:
+            yield func(*args, n_jobs)
+        return
+    from sklearn.utils.parallel import Parallel, delayed
+
+    yield from Parallel(return_as="generator")(delayed(func)(*args, 1) for args in jobs)
+
+
+def _ground_job(xyz, owned, filt, raster, n_jobs):
+    return _ground_tile(xyz, owned, filt, raster)
+
+
+def _cluster_job(xyz, owned, eps, min_samples, n_jobs):
+    return _cluster_tile(xyz, owned, eps, min_samples, n_jobs)
+
+
+def _result_array(folder, name, n, dtype, fill):
+    arr = np.lib.format.open_memmap(folder / name, mode="w+", dtype=dtype, shape=(n,))
+    arr[:] = fill
+    return arr
+
+
+def _detach(arr, path):
+    """``arr`` (a memory map of ``path``) with the file unlinked where the
+    system allows (the mapping keeps the data); else a copy in memory."""
+    arr.flush()
+    if os.name == "posix":
+        os.unlink(path)
+        return arr
+    return np.array(arr)
+
+
+def segment_tiled(
+    source,
+    *,
+    tile_size,
+    tile_buffer,
+    ground,
+    method,
+    eps,
+    min_samples,
+    min_cluster_size,
+    max_cluster_size,
+    random_state,
+    n_jobs,
+    chunk_size=1_000_000,
+    temp_folder=None,
+):
+    """The tiled path of :func:`~skpcd.segmentation.segment_scene`.
+
+    ``ground`` is a GroundFilter (the preset resolved) or None; the other
+    arguments are those of ``segment_scene``, validated. Returns
+    ``(labels, ground, eps)`` as memory-mapped arrays (file already
+    unlinked on POSIX systems).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from skpcd.segmentation._dbscan import AutoEpsDBSCAN
+
+    chunk_size = _check_chunk_size(chunk_size)
+    if method == "euclidean":
+        eps, min_samples = (0.2 if eps is None else float(eps)), 1
+    reach = 0.0 if ground is None else ground_reach(ground)
+    margin = 0.0 if ground is None else 2 * float(ground.cell)
+    if tile_buffer is None:
+        need = [reach + margin]
+        if eps is not None:
+            need.append(2 * eps)
+        elif ground is None:
+            need.append(0.1 * tile_size)
+        buffer = 1.01 * max(need) + 1e-6
+    else:
+        buffer = float(tile_buffer)
+    ground_buffer = max(0.0, min(reach, buffer - margin))
+    if eps is not None and 2 * eps > buffer:
+        raise ValueError(
+            f"tile_buffer={buffer:g} is too small for eps={eps:g}: the stitching "
+            f"of segments across tiles needs at least 2 * eps = {2 * eps:g}"
+        )
+    scene = tile_scene(
+        source, tile_size, buffer=buffer, chunk_size=chunk_size,
+        temp_folder=temp_folder,
+    )  # fmt: skip
+    out = Path(tempfile.mkdtemp(prefix="skpcd_labels_", dir=temp_folder))
+    try:
+        grid, n = scene.grid, scene.n_points
+        tiles = np.flatnonzero(scene.owned_counts())
+        is_ground = _result_array(out, "ground.npy", n, np.bool_, False)
+        labels = _result_array(out, "labels.npy", n, np.int64, -1)
+
+        def load(t):
+            xyz, index = scene.load(t)
+            return xyz, index, grid.owner(xyz) == t
+
+        # 1. ground: each tile's filter on the cells of its core square grown
+        # by the filter's reach, cut from the raster of the whole scene
+        if ground is not None:
+            cell = float(ground.cell)
+            lo = scene.mins[:2]
+            nxy = (np.floor((scene.maxs[:2] - lo) / cell) + 1).astype(np.int64)
+
+            def ground_jobs():
+                for t in tiles:
+                    xyz, index, owned = load(t)
+                    x0, y0, x1, y1 = grid.core_bounds(t)
+                    start = np.floor(
+                        (np.array([x0, y0]) - ground_buffer - lo) / cell
+                    ).astype(np.int64)
+                    stop = np.floor(
+                        (np.array([x1, y1]) + ground_buffer - lo) / cell
+                    ).astype(np.int64)
+                    start = np.clip(start, 0, nxy - 1)
+                    stop = np.clip(stop, 0, nxy - 1)
+                    cells = np.clip(
+                        np.floor((xyz[:, :2] - lo) / cell), 0, nxy - 1
+                    ).astype(np.int64)
+                    sel = np.all((cells >= start) & (cells <= stop), axis=1)
+                    raster = (
+                        float(lo[0]), float(lo[1]), int(nxy[0]), int(nxy[1]),
+                        int(start[0]), int(start[1]),
+                        int(stop[0] - start[0] + 1), int(stop[1] - start[1] + 1),
+                    )  # fmt: skip
+                    load.done.append(index[owned])
+                    yield np.ascontiguousarray(xyz[sel]), owned[sel], ground, raster
+
+            load.done = []
+            for flags in _map(_ground_job, ground_jobs(), n_jobs):
+                is_ground[load.done.pop(0)] = flags
+
+        # 2. eps, once for the whole scan: from the non-ground points of the
+        # tile that owns most of them (all its points: the scan's spacing)
+        if eps is None:
+            best, best_n = tiles[0], -1
+            for t in tiles:
+                _, index, owned = load(t)
+                n_rest = int((~is_ground[index[owned]]).sum())
+                if n_rest > best_n:
+                    best, best_n = t, n_rest
+            xyz, index, owned = load(best)
+            rest = xyz[owned & ~is_ground[index]]
+            if len(rest) < 2:
+                eps = 0.0
+            else:
+                est = AutoEpsDBSCAN(
+                    min_samples=min_samples, random_state=random_state, n_jobs=n_jobs
+                )
+                eps = float(est._estimate(np.ascontiguousarray(rest)))
+            if 2 * eps > buffer:
+                raise ValueError(
+                    f"the estimated eps={eps:g} needs a tile buffer of at least "
+                    f"2 * eps = {2 * eps:g}, more than tile_buffer={buffer:g}; "
+                    "pass a larger tile_buffer or give eps"
+                )
+
+        # 3. clusters: each tile's DBSCAN on its non-ground points within
+        # 2 * eps of its core square; owned points keep its labels, core
+        # points shared with another tile link the two tiles' clusters
+        if eps > 0:
+            reach_c = 2 * eps * (1 + 1e-9) + 1e-9
+
+            def cluster_jobs():
+                for t in tiles:
+                    xyz, index, owned = load(t)
+                    x0, y0, x1, y1 = grid.core_bounds(t)
+                    x, y = xyz[:, 0], xyz[:, 1]
+                    sel = (
+                        (x >= x0 - reach_c) & (x <= x1 + reach_c)
+                        & (y >= y0 - reach_c) & (y <= y1 + reach_c)
+                    )  # fmt: skip
+                    sel |= owned
+                    sel &= ~is_ground[index]
+                    load.done.append((index[sel], owned[sel]))
+                    yield np.ascontiguousarray(xyz[sel]), owned[sel], eps, min_samples
+
+            load.done = []
+            n_local, links = 0, []
+            for own_labels, shared, shared_labels in _map(
+                _cluster_job, cluster_jobs(), n_jobs
+            ):
+                index, owned = load.done.pop(0)
+                labels[index[owned]] = np.where(
+                    own_labels >= 0, own_labels + n_local, -1
+                )
+                links.append(np.column_stack([index[shared], shared_labels + n_local]))
+                n_top = max(
+                    int(own_labels.max(initial=-1)), int(shared_labels.max(initial=-1))
+                )
+                n_local += n_top + 1
+            # union of the clusters through their shared core points
+            links = np.concatenate(links) if links else np.zeros((0, 2), np.int64)
+            other = labels[links[:, 0]] if len(links) else np.zeros(0, np.int64)
+            if np.any(other < 0):  # pragma: no cover - the buffer rule forbids it
+                raise RuntimeError("a shared core point is not core in its own tile")
+            graph = coo_matrix(
+                (np.ones(len(links)), (links[:, 1], other)), shape=(n_local, n_local)
+            )
+            _, component = connected_components(graph, directed=False)
+            # sizes and first point of each segment, then the size range and
+            # the numbering of the untiled run (order of the first point)
+            n_comp = int(component.max(initial=-1)) + 1
+            sizes = np.zeros(n_comp, dtype=np.int64)
+            first = np.full(n_comp, n, dtype=np.int64)
+            for start in range(0, n, chunk_size):
+                part = labels[start : start + chunk_size]
+                comp = component[part[part >= 0]]
+                sizes += np.bincount(comp, minlength=n_comp)
+                pos = np.flatnonzero(part >= 0) + start
+                np.minimum.at(first, comp, pos)
+            keep = sizes >= min_cluster_size
+            if max_cluster_size is not None:
+                keep &= sizes <= max_cluster_size
+            number = np.full(n_comp, -1, dtype=np.int64)
+            kept = np.flatnonzero(keep)
+            number[kept[np.argsort(first[kept], kind="stable")]] = np.arange(len(kept))
+            final = np.append(number[component], -1)  # index -1: no cluster
+            for start in range(0, n, chunk_size):
+                part = labels[start : start + chunk_size]
+                part[:] = final[part]
+        result = (
+            _detach(labels, out / "labels.npy"),
+            _detach(is_ground, out / "ground.npy"),
+            float(eps),
+        )
+    finally:
+        scene.close()
+        shutil.rmtree(out, ignore_errors=True)
+    return result
