@@ -505,6 +505,76 @@ def _cluster_job(xyz, owned, eps, min_samples, n_jobs):
     return _cluster_tile(xyz, owned, eps, min_samples, n_jobs)
 
 
+def _estimate_eps(
+    scene, tiles, load, is_ground, min_samples, random_state, n_jobs, chunk_size
+):
+    """The eps of :class:`AutoEpsDBSCAN` for the non-ground points of the
+    whole scan, computed tile by tile: the same random sample of query points
+    as the untiled estimate (drawn among all non-ground points, in scan
+    order), their nearest neighbours searched among the non-ground points of
+    their buffered tile, which holds all of them when the k-th neighbour is
+    closer than the buffer (else a warning says the estimate may differ)."""
+    import warnings
+
+    from scipy.spatial import cKDTree
+    from sklearn.utils import check_random_state
+
+    from skpcd.segmentation._dbscan import AutoEpsDBSCAN, _fit_knee
+    from skpcd.utils._parallel import effective_threads
+
+    est = AutoEpsDBSCAN(min_samples=min_samples, random_state=random_state)
+    n = 0
+    for start in range(0, scene.n_points, chunk_size):
+        n += int((~is_ground[start : start + chunk_size]).sum())
+    if n < 2:
+        return 0.0
+    k_max = min(int(est.n_neighbors), n - 1)
+    if est.max_samples is not None and n > est.max_samples:
+        rng = check_random_state(random_state)
+        ranks = np.sort(rng.choice(n, int(est.max_samples), replace=False))
+    else:
+        ranks = np.arange(n)
+    # scan index of each query: its rank among the non-ground points
+    queries, seen = [], 0
+    for start in range(0, scene.n_points, chunk_size):
+        rest = np.flatnonzero(~is_ground[start : start + chunk_size])
+        lo, hi = np.searchsorted(ranks, [seen, seen + len(rest)])
+        queries.append(rest[ranks[lo:hi] - seen] + start)
+        seen += len(rest)
+    queries = np.concatenate(queries)
+    dist = np.empty((len(queries), k_max + 1))
+    farthest = 0.0
+    for t in tiles:
+        xyz, index, owned = load(t)
+        mine = np.flatnonzero(owned)
+        mine = mine[np.isin(index[mine], queries)]
+        if not len(mine):
+            continue
+        rest = ~is_ground[index]
+        tree = cKDTree(xyz[rest], balanced_tree=False, compact_nodes=False)
+        d, _ = tree.query(xyz[mine], k=k_max + 1, workers=effective_threads(n_jobs))
+        dist[np.searchsorted(queries, index[mine])] = d.reshape(len(mine), -1)
+        farthest = max(farthest, float(d.max()))
+    if farthest > scene.grid.buffer:
+        warnings.warn(
+            f"the eps estimate searched neighbours up to {farthest:g} away, beyond "
+            f"the tile buffer ({scene.grid.buffer:g}): it may differ from the "
+            "untiled estimate; pass a larger tile_buffer or give eps",
+            UserWarning,
+            stacklevel=3,
+        )
+    mean = dist[:, 1:].mean(axis=0)
+    _, _, knee_distance = _fit_knee(np.arange(1, k_max + 1), mean, est.degree)
+    if not knee_distance > 0:
+        raise ValueError(
+            "cannot estimate eps: the points' nearest-neighbour distances are "
+            "all zero (duplicated points); give eps"
+        )
+    # AutoEpsDBSCAN._estimate's last step (a multiple of the knee distance
+    # since eps_scale exists; test_tiling checks the two estimates agree)
+    return float(getattr(est, "eps_scale", 1.0)) * float(knee_distance)
+
+
 def _result_array(folder, name, n, dtype, fill):
     arr = np.lib.format.open_memmap(folder / name, mode="w+", dtype=dtype, shape=(n,))
     arr[:] = fill
@@ -547,8 +617,6 @@ def segment_tiled(
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    from skpcd.segmentation._dbscan import AutoEpsDBSCAN
-
     chunk_size = _check_chunk_size(chunk_size)
     if method == "euclidean":
         eps, min_samples = (0.2 if eps is None else float(eps)), 1
@@ -559,7 +627,7 @@ def segment_tiled(
         if eps is not None:
             need.append(2 * eps)
         elif ground is None:
-            need.append(0.1 * tile_size)
+            need.append(0.25 * tile_size)
         buffer = 1.01 * max(need) + 1e-6
     else:
         buffer = float(tile_buffer)
@@ -619,24 +687,12 @@ def segment_tiled(
             for flags in _map(_ground_job, ground_jobs(), n_jobs):
                 is_ground[load.done.pop(0)] = flags
 
-        # 2. eps, once for the whole scan: from the non-ground points of the
-        # tile that owns most of them (all its points: the scan's spacing)
+        # 2. eps, once for the whole scan (see _estimate_eps)
         if eps is None:
-            best, best_n = tiles[0], -1
-            for t in tiles:
-                _, index, owned = load(t)
-                n_rest = int((~is_ground[index[owned]]).sum())
-                if n_rest > best_n:
-                    best, best_n = t, n_rest
-            xyz, index, owned = load(best)
-            rest = xyz[owned & ~is_ground[index]]
-            if len(rest) < 2:
-                eps = 0.0
-            else:
-                est = AutoEpsDBSCAN(
-                    min_samples=min_samples, random_state=random_state, n_jobs=n_jobs
-                )
-                eps = float(est._estimate(np.ascontiguousarray(rest)))
+            eps = _estimate_eps(
+                scene, tiles, load, is_ground, min_samples, random_state, n_jobs,
+                chunk_size,
+            )  # fmt: skip
             if 2 * eps > buffer:
                 raise ValueError(
                     f"the estimated eps={eps:g} needs a tile buffer of at least "

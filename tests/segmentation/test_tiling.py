@@ -1,0 +1,172 @@
+"""Out-of-core scenes: tiles with buffers spilled to disk, and the tiled
+segment_scene, which must give the untiled answer (same labels, same
+ground) on a scene of real DALES objects with objects across tile borders."""
+
+import os
+
+import joblib
+import numpy as np
+import pytest
+
+from skpcd.segmentation import make_scene, segment_scene
+from skpcd.segmentation._tiling import TileGrid, tile_scene
+
+TILE = 25.0
+
+
+@pytest.fixture(scope="module")
+def scene(dales):
+    clouds, _, _ = dales
+    rng = np.random.default_rng(1)
+    pick = rng.choice(len(clouds), 24, replace=False)
+    return make_scene(
+        [clouds[i] for i in pick],
+        gap=3.0,
+        resample=0.5,
+        ground_density=10.0,
+        random_state=0,
+    )
+
+
+@pytest.fixture(scope="module")
+def untiled(scene):
+    points, _ = scene
+    return segment_scene(points, eps=1.0)
+
+
+def test_grid_owner_and_route_match_their_definition():
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(-5, 105, (3000, 2))
+    grid = TileGrid.cover([0, 0], [100, 60], 20.0, buffer=3.0)
+    assert grid.shape == (5, 3) and grid.n_tiles == 15
+    owner = grid.owner(xy)
+    rows, tiles = grid.route(xy)
+    pairs = set(zip(rows.tolist(), tiles.tolist(), strict=True))
+    for t in range(grid.n_tiles):
+        x0, y0, x1, y1 = grid.core_bounds(t)
+        # strictly inside the buffered square: routed; strictly outside: not
+        col, row = t % 5, t // 5
+        ex = [-np.inf if col == 0 else x0, np.inf if col == 4 else x1]
+        ey = [-np.inf if row == 0 else y0, np.inf if row == 2 else y1]
+        dx = np.maximum(ex[0] - xy[:, 0], xy[:, 0] - ex[1])
+        dy = np.maximum(ey[0] - xy[:, 1], xy[:, 1] - ey[1])
+        d = np.maximum(dx, dy)
+        for i in np.flatnonzero(d < 3.0 - 1e-9):
+            assert (i, t) in pairs
+        for i in np.flatnonzero(d > 3.0 + 1e-9):
+            assert (i, t) not in pairs
+        inside = d < 0
+        assert np.all(owner[inside] == t)
+    assert all((i, o) in pairs for i, o in enumerate(owner.tolist()))
+
+
+@pytest.mark.parametrize("size, buffer", [(0.0, 1.0), (-1.0, 1.0), (10.0, -1.0)])
+def test_grid_refuses_bad_sizes(size, buffer):
+    with pytest.raises(ValueError, match="tile"):
+        TileGrid.cover([0, 0], [10, 10], size, buffer)
+
+
+def test_tile_scene_spills_every_point_and_cleans_up(tmp_path, scene):
+    points, _ = scene
+    points = points[:20000]
+    with tile_scene(
+        points, 20.0, buffer=4.0, chunk_size=3001, temp_folder=tmp_path
+    ) as tiles:
+        assert tiles.n_points == len(points)
+        assert np.array_equal(tiles.mins, points.min(axis=0))
+        owned_total = []
+        for t in range(tiles.grid.n_tiles):
+            xyz, index = tiles.load(t)
+            assert np.all(np.diff(index) > 0)  # scan order
+            assert np.array_equal(xyz, points[index])
+            owned = tiles.grid.owner(xyz) == t
+            owned_total.append(index[owned])
+            x0, y0, x1, y1 = tiles.grid.core_bounds(t)
+            near = (
+                (points[:, 0] > x0 - 3.9)
+                & (points[:, 0] < x1 + 3.9)
+                & (points[:, 1] > y0 - 3.9)
+                & (points[:, 1] < y1 + 3.9)
+            )
+            assert set(np.flatnonzero(near)) <= set(index.tolist())
+        owned_total = np.sort(np.concatenate(owned_total))
+        assert np.array_equal(owned_total, np.arange(len(points)))
+        assert os.listdir(tmp_path)
+    assert os.listdir(tmp_path) == []
+
+
+def test_tile_scene_refuses_bad_input(tmp_path):
+    with pytest.raises(ValueError, match="chunk_size"):
+        tile_scene(np.zeros((5, 3)), 10.0, chunk_size=0, temp_folder=tmp_path)
+    bad = np.zeros((5, 3))
+    bad[2, 0] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        tile_scene(bad, 10.0, temp_folder=tmp_path)
+    assert os.listdir(tmp_path) == []
+
+
+def _straddling(points, truth, grid):
+    """Objects whose points are owned by more than one tile."""
+    owner = grid.owner(points)
+    objects = np.unique(truth[truth >= 0])
+    return [o for o in objects if len(np.unique(owner[truth == o])) > 1]
+
+
+def test_tiled_equals_untiled_with_objects_across_borders(scene, untiled, tmp_path):
+    points, truth = scene
+    grid = TileGrid.cover(points.min(axis=0), points.max(axis=0), TILE)
+    assert grid.n_tiles >= 8
+    across = _straddling(points, truth, grid)
+    assert len(across) >= 5  # several objects cut by tile borders
+    tiled = segment_scene(points, eps=1.0, tile_size=TILE, temp_folder=tmp_path)
+    assert np.array_equal(tiled.ground, untiled.ground)
+    assert np.array_equal(tiled.labels, untiled.labels)
+    assert tiled.eps == untiled.eps == 1.0
+    # the objects cut by borders are whole: each in one segment for most
+    # of its points
+    for o in across:
+        seg = tiled.labels[truth == o]
+        seg = seg[seg >= 0]
+        if len(seg):
+            assert np.bincount(seg).max() >= 0.9 * len(seg)
+    assert os.listdir(tmp_path) == []
+
+
+def test_tiled_estimates_eps_once_like_untiled(scene):
+    points, _ = scene
+    a = segment_scene(points, tile_size=TILE)
+    b = segment_scene(points)
+    assert a.eps == b.eps
+    assert np.array_equal(a.labels, b.labels)
+
+
+def test_tiled_euclidean_without_ground_and_from_a_las_file(scene, tmp_path):
+    pytest.importorskip("laspy")
+    from skpcd.io import read_point_cloud, write_point_cloud
+
+    points, _ = scene
+    path = tmp_path / "scene.las"
+    write_point_cloud(path, points)
+    stored = read_point_cloud(path)
+    kwargs = {"ground": None, "method": "euclidean", "eps": 0.8}
+    a = segment_scene(stored, **kwargs)
+    b = segment_scene(path, tile_size=TILE, temp_folder=tmp_path, **kwargs)
+    assert a.n_segments > 5
+    assert np.array_equal(a.labels, b.labels)
+    assert not b.ground.any()
+    assert sorted(os.listdir(tmp_path)) == ["scene.las"]
+
+
+def test_tiled_on_a_joblib_backend(scene, untiled):
+    points, _ = scene
+    with joblib.parallel_config(backend="threading", n_jobs=2):
+        tiled = segment_scene(points, eps=1.0, tile_size=TILE)
+    assert np.array_equal(tiled.labels, untiled.labels)
+
+
+def test_buffer_too_small_for_eps(scene):
+    points, _ = scene
+    with pytest.raises(ValueError, match="2 \\* eps"):
+        segment_scene(points, eps=1.0, tile_size=TILE, tile_buffer=1.5)
+    with pytest.raises(ValueError, match="tile_size"):
+        segment_scene(points, tile_size=0.0)
