@@ -430,16 +430,27 @@ def _add_segmentation_options(p):
 
 
 def _segment_file(args, command, fields=None):
-    """Read SCENE and segment it; returns ``(points, extras, result)``."""
+    """Read SCENE and segment it; returns ``(points, extras, result)``.
+
+    With ``--tile-size`` the scene is not read here (segment_scene streams
+    it tile by tile): ``points`` is None and ``extras`` empty."""
     from skpcd.io import read_point_cloud
     from skpcd.segmentation import segment_scene
 
-    read = read_point_cloud(args.scene, fields=fields)
-    points, extras = read if fields else (read, {})
+    tiled = getattr(args, "tile_size", None) is not None
+    if tiled:
+        points, extras, source = None, {}, args.scene
+    else:
+        read = read_point_cloud(args.scene, fields=fields)
+        points, extras = read if fields else (read, {})
+        source = points
+    tiling = (
+        {"tile_size": args.tile_size, "tile_buffer": args.tile_buffer} if tiled else {}
+    )
     start = time.perf_counter()
     try:
         result = segment_scene(
-            points,
+            source,
             ground=None if args.ground == "none" else args.ground,
             method=args.method,
             eps=args.eps,
@@ -448,13 +459,14 @@ def _segment_file(args, command, fields=None):
             max_cluster_size=args.max_size,
             random_state=args.random_state,
             n_jobs=args.n_jobs,
+            **tiling,
         )
     except ValueError as exc:
         raise SystemExit(f"skpcd {command}: {exc}") from exc
     if not args.quiet:
         labels = result.labels
         print(
-            f"scene     {args.scene}: {len(points)} points, "
+            f"scene     {args.scene}: {len(labels)} points, "
             f"{int(result.ground.sum())} ground"
         )
         print(
@@ -470,6 +482,48 @@ def _segment_members(labels, n_segments):
     order = np.argsort(labels, kind="stable")
     bounds = np.searchsorted(labels[order], np.arange(n_segments + 1))
     return [order[bounds[i] : bounds[i + 1]] for i in range(n_segments)]
+
+
+def _streamed_segments(scene, labels, n_segments, keep_fields, out):
+    """``(points, fields)`` of each segment, gathered in one pass over the
+    scene's chunks into one temporary file per segment (in a hidden folder
+    of ``out``), so that the scene is never in memory."""
+    import shutil
+    import tempfile
+
+    from skpcd.segmentation._tiling import iter_chunks
+
+    spill = Path(tempfile.mkdtemp(prefix=".skpcd_segments_", dir=out))
+    try:
+        dtype, start = None, 0
+        chunks = iter_chunks(scene, 1_000_000, fields=keep_fields)
+        if not keep_fields:
+            chunks = ((xyz, {}) for xyz in chunks)
+        for xyz, extras in chunks:
+            if dtype is None:
+                dtype = np.dtype(
+                    [("xyz", np.float64, (3,))]
+                    + [(k, v.dtype, v.shape[1:]) for k, v in extras.items()]
+                )
+            part = np.asarray(labels[start : start + len(xyz)])
+            start += len(xyz)
+            order = np.argsort(part, kind="stable")
+            bounds = np.searchsorted(part[order], np.arange(n_segments + 1))
+            records = np.empty(len(xyz), dtype=dtype)
+            records["xyz"] = xyz
+            for k, v in extras.items():
+                records[k] = v
+            for i in np.flatnonzero(np.diff(bounds)):
+                with open(spill / f"{i}.bin", "ab") as f:
+                    records[order[bounds[i] : bounds[i + 1]]].tofile(f)
+        for i in range(n_segments):
+            records = np.fromfile(spill / f"{i}.bin", dtype=dtype)
+            yield (
+                np.ascontiguousarray(records["xyz"]),
+                {k: records[k] for k in dtype.names[1:]},
+            )
+    finally:
+        shutil.rmtree(spill, ignore_errors=True)
 
 
 def _cmd_segment(args):
@@ -503,9 +557,16 @@ def _cmd_segment(args):
         )
     out.mkdir(parents=True, exist_ok=True)
     rows = []
-    for i, idx in enumerate(_segment_members(result.labels, n)):
-        seg = points[idx]
-        fields = {name: values[idx] for name, values in extras.items()}
+    if points is None:  # tiled: the segments gathered in one pass over the scene
+        segments = _streamed_segments(
+            args.scene, result.labels, n, args.keep_fields, out
+        )
+    else:
+        segments = (
+            (points[idx], {name: values[idx] for name, values in extras.items()})
+            for idx in _segment_members(result.labels, n)
+        )
+    for i, (seg, fields) in enumerate(segments):
         try:
             write_point_cloud(
                 out / names[i], seg, fields=fields or None, overwrite=args.overwrite
@@ -513,7 +574,7 @@ def _cmd_segment(args):
         except ValueError as exc:  # a field the format cannot hold
             raise SystemExit(f"skpcd segment: {exc}") from exc
         lo, hi = seg.min(axis=0), seg.max(axis=0)
-        rows.append([names[i], i, len(idx), *lo, *hi, *(hi - lo)])
+        rows.append([names[i], i, len(seg), *lo, *hi, *(hi - lo)])
     tmp = summary.with_name(f".{summary.name}.tmp")
     with open(tmp, "w", newline="") as f:
         writer = csv.writer(f)
@@ -733,6 +794,21 @@ def build_parser():
         action="store_true",
         help="copy the scene's extra fields (intensity...) into the segments",
     )
+    seg.add_argument(
+        "--tile-size",
+        type=float,
+        default=None,
+        help="process the scene in square tiles of this side (metres), streaming "
+        "LAS/LAZ input, so that memory is bounded by the tile, not the scene; "
+        "same segments as without",
+    )
+    seg.add_argument(
+        "--tile-buffer",
+        type=float,
+        default=None,
+        help="overlap around each tile (m); default: the smallest that keeps "
+        "the result exact (see segment_scene)",
+    )
     _add_segmentation_options(seg)
     seg.set_defaults(func=_cmd_segment)
 
@@ -752,7 +828,41 @@ def build_parser():
     )
     _add_segmentation_options(ident)
     ident.set_defaults(func=_cmd_identify)
+    for p in (desc, fit, pred, seg):
+        p.add_argument(
+            "--scheduler",
+            metavar="ADDRESS",
+            help="run on an existing Dask cluster: the scheduler's address, e.g. "
+            "tcp://host:8786 (needs pip install 'skpcd[dask]')",
+        )
     return parser
+
+
+# Seconds to wait for a Dask scheduler before giving up.
+_SCHEDULER_TIMEOUT = 10
+
+
+def _on_cluster(args):
+    """Run the command inside ``joblib.parallel_config(backend="dask")``
+    with a client of the scheduler at ``args.scheduler``."""
+    try:
+        from distributed import Client
+    except ImportError as exc:
+        raise SystemExit(
+            f"skpcd {args.command}: --scheduler needs dask.distributed: pip "
+            "install 'skpcd[dask]'"
+        ) from exc
+    import joblib
+
+    try:
+        client = Client(args.scheduler, timeout=_SCHEDULER_TIMEOUT)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise SystemExit(
+            f"skpcd {args.command}: cannot reach the Dask scheduler at "
+            f"{args.scheduler} ({type(exc).__name__}: {exc})"
+        ) from exc
+    with client, joblib.parallel_config(backend="dask"):
+        return args.func(args)
 
 
 def main(argv=None):
@@ -772,6 +882,8 @@ def main(argv=None):
 
     args = build_parser().parse_args(argv)
     try:
+        if getattr(args, "scheduler", None):
+            return _on_cluster(args)
         return args.func(args)
     except (PointCloudFileError, FileExistsError) as exc:  # bad input files
         print(f"skpcd {args.command}: error: {exc}", file=sys.stderr)

@@ -474,3 +474,93 @@ def test_identify_refuses_bad_output_places_before_any_work(tmp_path, capsys):
             )
     assert scene.read_bytes() == original
     assert model.read_bytes() == b"not read: the output is refused first"
+
+
+# --- out of core (--tile-size) and on a Dask cluster (--scheduler) -------------
+
+
+def _tree_bytes(folder):
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+@pytest.mark.parametrize("ext", [".las", ".ply"])
+def test_segment_tiled_writes_the_untiled_files(tmp_path, capsys, ext):
+    if ext == ".las":
+        pytest.importorskip("laspy")
+    scene = tmp_path / f"scene{ext}"
+    _scene_file(scene, random_state=2)
+    args = ["segment", str(scene), "--eps", "1.0", "--min-size", "30", "--quiet"]
+    assert main([*args, "-o", str(tmp_path / "whole"), "--keep-fields"]) == 0
+    tiled = [*args, "-o", str(tmp_path / "tiles"), "--keep-fields"]
+    assert main([*tiled, "--tile-size", "12"]) == 0
+    whole = _tree_bytes(tmp_path / "whole")
+    assert len(whole) > 5
+    assert _tree_bytes(tmp_path / "tiles") == whole  # no temporary file left
+    with pytest.raises(SystemExit, match="2 \\* eps"):
+        main([*tiled, "--overwrite", "--tile-size", "12", "--tile-buffer", "1"])
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    distributed = pytest.importorskip(
+        "distributed", reason="the dask extra is not installed (skpcd[dask])"
+    )
+    with (
+        distributed.LocalCluster(
+            n_workers=2, processes=True, threads_per_worker=1, dashboard_address=":0"
+        ) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        yield cluster.scheduler_address, client
+
+
+def test_scheduler_gives_the_local_outputs(tmp_path, cluster):
+    from distributed import get_task_stream
+
+    address, client = cluster
+    scene = tmp_path / "scene.ply"
+    _scene_file(scene, random_state=2)
+    seg = ["segment", str(scene), "--eps", "1.0", "--min-size", "30", "--quiet"]
+    seg += ["--tile-size", "12"]
+    _labelled_folder(tmp_path / "train", n_per_class=4)
+    outputs = {}
+    for where, extra in (("local", []), ("dask", ["--scheduler", address])):
+        out = tmp_path / where
+        out.mkdir()
+        with get_task_stream(client) as stream:
+            assert main([*seg, "-o", str(out / "segs"), *extra]) == 0
+            fit = ["fit", str(tmp_path / "train"), "-o", str(out / "m.joblib")]
+            assert main([*fit, "--quiet", *extra]) == 0
+            plys = str(out / "segs" / "*.ply")
+            desc = ["describe", plys, "-o", str(out / "d.npz")]
+            assert main([*desc, "--quiet", *extra]) == 0
+            pred = ["predict", str(tmp_path / "local" / "m.joblib"), plys]
+            assert main([*pred, "-o", str(out / "p.csv"), "--quiet", *extra]) == 0
+        assert (len(stream.data) > 0) == (where == "dask")  # ran on the workers
+        with np.load(out / "d.npz") as npz:
+            outputs[where] = (
+                _tree_bytes(out / "segs"),
+                {k: npz[k] for k in npz.files},
+                (out / "p.csv").read_bytes(),
+            )
+    local, dask = outputs["local"], outputs["dask"]
+    assert dask[0] == local[0] and len(local[0]) > 5
+    assert dask[1].keys() == local[1].keys()
+    for k in local[1]:
+        np.testing.assert_array_equal(dask[1][k], local[1][k])
+    assert dask[2] == local[2]
+
+
+def test_scheduler_unreachable_or_missing(tmp_path, monkeypatch):
+    import skpcd.cli
+
+    pytest.importorskip("distributed")
+    _labelled_folder(tmp_path / "seg", n_per_class=1)
+    monkeypatch.setattr(skpcd.cli, "_SCHEDULER_TIMEOUT", 1)
+    args = ["describe", str(tmp_path / "seg"), "-o", str(tmp_path / "d.npz")]
+    with pytest.raises(SystemExit, match="cannot reach the Dask scheduler at tcp"):
+        main([*args, "--scheduler", "tcp://127.0.0.1:9"])
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    with pytest.raises(SystemExit, match="pip install 'skpcd\\[dask\\]'"):
+        main([*args, "--scheduler", "tcp://127.0.0.1:9"])
+    assert not (tmp_path / "d.npz").exists()

@@ -88,11 +88,15 @@ class LasExtent(typing.NamedTuple):
         Lowest x, y, z the header declares.
     maxs : ndarray of shape (3,)
         Highest x, y, z the header declares.
+    dimensions : tuple of str
+        The dimensions of the points, under laspy's names (``X``, ``Y``,
+        ``Z``, ``intensity``..., then the extra bytes).
     """
 
     n_points: int
     mins: np.ndarray
     maxs: np.ndarray
+    dimensions: tuple
 
 
 def read_las_extent(path):
@@ -110,7 +114,7 @@ def read_las_extent(path):
     Returns
     -------
     extent : LasExtent
-        Named tuple ``(n_points, mins, maxs)``.
+        Named tuple ``(n_points, mins, maxs, dimensions)``.
 
     Raises
     ------
@@ -143,6 +147,7 @@ def read_las_extent(path):
             int(header.point_count),
             np.array(header.mins, dtype=np.float64),
             np.array(header.maxs, dtype=np.float64),
+            tuple(header.point_format.dimension_names),
         )
 
 

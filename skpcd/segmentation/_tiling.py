@@ -246,23 +246,47 @@ def _is_path(source):
     return isinstance(source, (str, os.PathLike))
 
 
-def iter_chunks(source, chunk_size):
-    """Chunks of xyz (float64, ``(n, 3)``) of a path or an array."""
+def iter_chunks(source, chunk_size, *, fields=None):
+    """Chunks of xyz (float64, ``(n, 3)``) of a path or an array; with
+    ``fields`` True, ``(xyz, extras)`` chunks with every field of the file,
+    named as :func:`~skpcd.io.read_point_cloud` with ``fields="all"`` names
+    them."""
     if _is_path(source):
         suffix = Path(os.fspath(source)).suffix.lower()
         if suffix in (".las", ".laz"):
-            from skpcd.io import iter_points
+            from skpcd.io import iter_points, read_las_extent
+            from skpcd.io._ply import _group
 
-            yield from iter_points(source, chunk_size=chunk_size)
+            if not fields:
+                yield from iter_points(source, chunk_size=chunk_size)
+                return
+            names = [
+                n
+                for n in read_las_extent(source).dimensions
+                if n not in ("X", "Y", "Z")
+            ]
+            for xyz, extras in iter_points(source, chunk_size=chunk_size, fields=names):
+                yield xyz, _group(extras)[0]
             return
         from skpcd.io import read_point_cloud
 
-        source = read_point_cloud(source)  # not out of core: no chunked reader
+        # not out of core: no chunked reader for this format
+        if fields:
+            source, extras = read_point_cloud(source, fields="all")
+            for start in range(0, len(source), chunk_size):
+                stop = start + chunk_size
+                yield (
+                    source[start:stop],
+                    {k: v[start:stop] for k, v in extras.items()},
+                )
+            return
+        source = read_point_cloud(source)
     from skpcd.segmentation._clusters import check_scene
 
     xyz = check_scene(source)
     for start in range(0, len(xyz), chunk_size):
-        yield xyz[start : start + chunk_size]
+        chunk = xyz[start : start + chunk_size]
+        yield (chunk, {}) if fields else chunk
 
 
 def scene_bounds(source, chunk_size):
