@@ -139,11 +139,12 @@ def _add_run(cell_key, cell_start, p, c_hi, k_hi, starts, stops, n):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _block(
+def cell_block(
     cell, prev, cell_cloud, cell_key, cell_start, cloud_cells, dims, cur, starts, stops
 ):
     """The runs of points of the 27 cells around ``cell``, into
-    ``starts``/``stops``; returns their number. ``cur`` holds one cursor per
+    ``starts``/``stops``; returns their number (internal API, also used by
+    :mod:`skpcd.segmentation._cluster_kernels`). ``cur`` holds one cursor per
     column, kept when ``cell`` follows ``prev`` in the same cloud (cursors
     then only move forward), otherwise found again by bisection. Inlined."""
     c = cell_cloud[cell]
@@ -301,7 +302,7 @@ def knn_cells(
     prev = -1
     for p in range(lo, hi):
         cell = cells[p]
-        n_block = _block(
+        n_block = cell_block(
             cell, prev, cell_cloud, cell_key, cell_start, cloud_cells, dims, cur,
             block_start, block_stop,
         )  # fmt: skip
@@ -517,7 +518,7 @@ def _ball(
     ends_own = np.zeros(2, dtype=np.int64)
     ends = borrow(ends_own)
     for cell in range(lo, hi):
-        n_runs = _block(
+        n_runs = cell_block(
             cell, cell - 1 if cell > lo else -1, cell_cloud, cell_key, cell_start,
             cloud_cells, dims, cur, starts, stops,
         )  # fmt: skip

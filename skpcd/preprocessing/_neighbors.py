@@ -222,13 +222,13 @@ def search_packed(
             if attempt == _COARSER - 1:
                 break
             # isolated points: again on cells four times wider
-            origin, h, dims = _grid_shape(xyz, cloud_ptr, 4 * h)
-            order, cells = _build_grid(xyz, cloud_ptr, origin, h, dims)
+            origin, h, dims = grid_shape(xyz, cloud_ptr, 4 * h)
+            order, cells = build_grid(xyz, cloud_ptr, origin, h, dims)
             rows = g.cells_with(todo, order, cells[2])
         _knn_kd_tree(xyz, cloud_ptr, indptr, np.flatnonzero(todo), n_jobs, nb)
         return nb
-    origin, h, dims = _grid_shape(xyz, cloud_ptr, np.full(len(sizes), radius))
-    order, cells = _build_grid(xyz, cloud_ptr, origin, h, dims)
+    origin, h, dims = grid_shape(xyz, cloud_ptr, np.full(len(sizes), radius))
+    order, cells = build_grid(xyz, cloud_ptr, origin, h, dims)
     args = (g.gather_rows(xyz, order), order, *cells, dims, float(radius) ** 2)
     counts = np.empty(n, dtype=np.int64)
     none_i, none_f = np.empty(0, dtype=np.int32), np.empty(0, dtype=np.float32)
@@ -247,8 +247,11 @@ def search_packed(
     return nb
 
 
-def _build_grid(xyz, cloud_ptr, origin, h, dims):
+def build_grid(xyz, cloud_ptr, origin, h, dims):
     """Points sorted by (cloud, cell key), and the cells.
+
+    Internal API shared with :mod:`skpcd.segmentation` and
+    :mod:`skpcd.features` (not re-exported by :mod:`skpcd.preprocessing`).
 
     Returns ``order`` (point indices in that order) and the tuple
     ``(cell_cloud, cell_key, cell_start, cloud_cells)`` of
@@ -285,8 +288,12 @@ def _extents(xyz, cloud_ptr):
     return lo, hi
 
 
-def _grid_shape(xyz, cloud_ptr, h, lo_hi=None):
-    """Origins, cell sizes (at least ``h``, above the radius) and grid shapes."""
+def grid_shape(xyz, cloud_ptr, h, lo_hi=None):
+    """Origins, cell sizes (at least ``h``, above the radius) and grid shapes.
+
+    Internal API shared with :mod:`skpcd.segmentation` and
+    :mod:`skpcd.features` (not re-exported by :mod:`skpcd.preprocessing`).
+    """
     from skpcd.preprocessing._grid_kernels import MAX_DIM
 
     lo, hi = _extents(xyz, cloud_ptr) if lo_hi is None else lo_hi
@@ -299,10 +306,15 @@ def _grid_shape(xyz, cloud_ptr, h, lo_hi=None):
     return lo, h, dims
 
 
+# The old private names, still imported by skpcd.features._pfh.
+_build_grid = build_grid
+_grid_shape = grid_shape
+
+
 def _knn_grid(xyz, cloud_ptr, k):
     """Grid for k-nearest searches, cell sizes adapted to each cloud's density.
 
-    Returns ``origin, h, dims`` and :func:`_build_grid`'s ``order, cells``.
+    Returns ``origin, h, dims`` and :func:`build_grid`'s ``order, cells``.
     """
     sizes = np.diff(cloud_ptr)
     target = max(1.0, _OCCUPANCY * k)
@@ -312,8 +324,8 @@ def _knn_grid(xyz, cloud_ptr, k):
     area = e[:, 2] * np.maximum(e[:, 1], 1e-3 * e[:, 2])
     h = np.sqrt(area * target / np.maximum(sizes, 1))
     for _ in range(3):
-        origin, h, dims = _grid_shape(xyz, cloud_ptr, h, (lo, hi))
-        order, cells = _build_grid(xyz, cloud_ptr, origin, h, dims)
+        origin, h, dims = grid_shape(xyz, cloud_ptr, h, (lo, hi))
+        order, cells = build_grid(xyz, cloud_ptr, origin, h, dims)
         occupancy = sizes / np.maximum(np.diff(cells[3]), 1)
         off = (occupancy < target / 2) | (occupancy > target * 2)
         off &= sizes > 4 * target

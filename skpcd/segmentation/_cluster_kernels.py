@@ -3,7 +3,7 @@
 The grid is the radius-search grid of :mod:`skpcd.preprocessing._neighbors`:
 cells at least ``eps`` wide, points sorted by cell key, so that the points
 within ``eps`` of a point lie in the 27 cells around its cell, found as 9
-runs of memory by :func:`skpcd.preprocessing._grid_kernels._block`.
+runs of memory by :func:`skpcd.preprocessing._grid_kernels.cell_block`.
 
 Nothing here stores a neighbourhood. The kernels work on *sorted positions*
 ``t`` (the point ``order[t]``): a union-find forest ``parent`` over
@@ -15,7 +15,7 @@ nearest core point within ``eps``. Memory is O(n_points).
 import numpy as np
 from numba import njit
 
-from skpcd.preprocessing._grid_kernels import _block
+from skpcd.preprocessing._grid_kernels import cell_block
 from skpcd.utils._numba import borrow, keep
 
 
@@ -53,7 +53,7 @@ def union_core(
     starts = borrow(i_own[9:18])
     stops = borrow(i_own[18:])
     for cell in range(lo, hi):
-        n_runs = _block(
+        n_runs = cell_block(
             cell, cell - 1 if cell > lo else -1, cell_cloud, cell_key, cell_start,
             cloud_cells, dims, cur, starts, stops,
         )  # fmt: skip
@@ -113,7 +113,7 @@ def attach_border(
     starts = borrow(i_own[9:18])
     stops = borrow(i_own[18:])
     for cell in range(lo, hi):
-        n_runs = _block(
+        n_runs = cell_block(
             cell, cell - 1 if cell > lo else -1, cell_cloud, cell_key, cell_start,
             cloud_cells, dims, cur, starts, stops,
         )  # fmt: skip

@@ -69,11 +69,11 @@ def check_scene(X, estimator=None, *, min_points=1, reset=True):
 def _radius_grid(xyz, eps):
     """The radius-search grid of :mod:`skpcd.preprocessing._neighbors` for
     one cloud: ``(xs, order, cells, dims)``, ``xs`` the points in cell order."""
-    from skpcd.preprocessing._neighbors import _build_grid, _grid_shape
+    from skpcd.preprocessing._neighbors import build_grid, grid_shape
 
     cloud_ptr = np.array([0, len(xyz)], dtype=np.int64)
-    origin, h, dims = _grid_shape(xyz, cloud_ptr, np.array([float(eps)]))
-    order, cells = _build_grid(xyz, cloud_ptr, origin, h, dims)
+    origin, h, dims = grid_shape(xyz, cloud_ptr, np.array([float(eps)]))
+    order, cells = build_grid(xyz, cloud_ptr, origin, h, dims)
     return xyz[order], order, cells, dims
 
 
