@@ -169,3 +169,70 @@ def test_missing_laspy(tmp_path, monkeypatch):
         read_point_cloud(path)
     with pytest.raises(ImportError, match=message):
         write_point_cloud(tmp_path / "other.laz", np.eye(3))
+
+
+# --- chunked reading: iter_points and read_las_extent -------------------------
+
+
+@pytest.mark.parametrize("ext", EXTENSIONS)
+def test_iter_points_chunks_are_the_whole_file(tmp_path, ext):
+    from skpcd.io import iter_points, read_las_extent
+
+    points, fields = _cloud(n=2503)
+    path = tmp_path / f"cloud{ext}"
+    write_point_cloud(path, points, fields=fields)
+    whole, extras = read_point_cloud(path, fields=["intensity", "gps_time"])
+    chunks = list(iter_points(path, chunk_size=1000))
+    assert [len(c) for c in chunks] == [1000, 1000, 503]
+    assert all(c.dtype == np.float64 and c.shape[1] == 3 for c in chunks)
+    assert np.array_equal(np.vstack(chunks), whole)
+    chunks = list(iter_points(path, chunk_size=700, fields=["intensity", "gps_time"]))
+    assert np.array_equal(np.vstack([c for c, _ in chunks]), whole)
+    for name in ("intensity", "gps_time"):
+        got = np.concatenate([e[name] for _, e in chunks])
+        assert got.dtype == extras[name].dtype
+        assert np.array_equal(got, extras[name])
+    assert len(list(iter_points(path, chunk_size=10**7))) == 1
+    extent = read_las_extent(path)
+    assert extent.n_points == 2503
+    assert np.array_equal(extent.mins, whole.min(axis=0))
+    assert np.array_equal(extent.maxs, whole.max(axis=0))
+    assert extent.dimensions[:3] == ("X", "Y", "Z")
+    assert "intensity" in extent.dimensions
+
+
+@pytest.mark.parametrize("chunk_size", [0, -5, 2.5, True, "10", None])
+def test_iter_points_refuses_a_bad_chunk_size(tmp_path, chunk_size):
+    from skpcd.io import iter_points
+
+    path = tmp_path / "cloud.las"
+    write_point_cloud(path, _cloud(n=10)[0])
+    with pytest.raises(ValueError, match="chunk_size must be a positive integer"):
+        iter_points(path, chunk_size=chunk_size)
+
+
+@pytest.mark.parametrize("ext", EXTENSIONS)
+def test_iter_points_unreadable_files(tmp_path, ext):
+    from skpcd.exceptions import MissingFileError
+    from skpcd.io import iter_points, read_las_extent
+
+    garbage = tmp_path / f"garbage{ext}"
+    garbage.write_bytes(b"not a las file at all" * 20)
+    for reader in (lambda p: list(iter_points(p)), read_las_extent):
+        with _raises(garbage, "cannot read as LAS/LAZ"):
+            reader(garbage)
+    with pytest.raises(MissingFileError):
+        iter_points(tmp_path / f"missing{ext}")
+    with _raises(tmp_path / "cloud.ply", "not a LAS/LAZ file"):
+        iter_points(tmp_path / "cloud.ply")
+    # truncated in the middle: the first chunks come, then the error
+    path = tmp_path / f"cut{ext}"
+    write_point_cloud(path, _cloud(n=5000)[0])
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    chunks = iter_points(path, chunk_size=500)
+    with _raises(path, "cannot read as LAS/LAZ"):
+        for _ in chunks:
+            pass
+    with _raises(path, "no field 'nope'"):
+        next(iter_points(path, fields=["nope"]))
