@@ -125,7 +125,9 @@ def segment_scene(
         not the scan size (see Notes). The result is the untiled one.
     tile_buffer : float or None, default=None
         Overlap loaded around each tile. None picks the smallest that keeps
-        the result equal to the untiled one: the ground filter's reach,
+        the result equal to the untiled one (a smaller buffer, at least
+        ``2 * eps``, keeps the segments exact but lets the ground filter
+        differ near tile borders): the ground filter's reach,
         ``(2 * ceil(window / cell) + 4) * cell`` plus two cells (46 m for
         ``"aerial"``, 25 m for ``"mobile"``), and at least ``2 * eps``;
         without ground removal and with ``eps=None``, a quarter of the tile.
@@ -140,7 +142,9 @@ def segment_scene(
     -------
     result : SceneSegmentation
         Named tuple ``(labels, ground, eps)``; ``labels`` is -1 outside
-        segments, ``ground`` marks the ground points.
+        segments, ``ground`` marks the ground points. With ``tile_size``
+        both arrays are :class:`numpy.memmap` of files in ``temp_folder``
+        (unlinked already on POSIX systems, so nothing is left behind).
 
     See Also
     --------

@@ -316,7 +316,13 @@ def _check_chunk_size(chunk_size):
 
 
 def tile_scene(
-    source, tile_size, *, buffer=0.0, chunk_size=1_000_000, temp_folder=None
+    source,
+    tile_size,
+    *,
+    buffer=0.0,
+    chunk_size=1_000_000,
+    temp_folder=None,
+    _bounds=None,
 ):
     """Cut a scene into buffered square tiles spilled to temporary files.
 
@@ -359,7 +365,7 @@ def tile_scene(
     True True
     """
     chunk_size = _check_chunk_size(chunk_size)
-    mins, maxs = scene_bounds(source, chunk_size)
+    mins, maxs = scene_bounds(source, chunk_size) if _bounds is None else _bounds
     if not np.all(mins <= maxs):
         raise ValueError("the scene has no points")
     grid = TileGrid.cover(mins, maxs, tile_size, buffer)
@@ -395,6 +401,17 @@ def tile_scene(
     if start == 0:
         shutil.rmtree(folder, ignore_errors=True)
         raise ValueError("the scene has no points")
+    end = np.array(grid.origin) + grid.size * np.array(grid.shape)
+    if _bounds is None and not (
+        np.all(lo[:2] >= grid.origin) and np.all(hi[:2] <= end)
+    ):
+        # a LAS header whose bounds do not hold the points: tile again on
+        # the true bounds (edge tiles would own points beyond their square)
+        shutil.rmtree(folder, ignore_errors=True)
+        return tile_scene(
+            source, tile_size, buffer=buffer, chunk_size=chunk_size,
+            temp_folder=temp_folder, _bounds=(lo, hi),
+        )  # fmt: skip
     return TiledScene(grid, folder, start, lo, hi, counts, owned)
 
 

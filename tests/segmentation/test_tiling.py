@@ -170,3 +170,28 @@ def test_buffer_too_small_for_eps(scene):
         segment_scene(points, eps=1.0, tile_size=TILE, tile_buffer=1.5)
     with pytest.raises(ValueError, match="tile_size"):
         segment_scene(points, tile_size=0.0)
+
+
+def test_a_las_header_with_wrong_bounds_is_tiled_on_the_true_bounds(tmp_path):
+    pytest.importorskip("laspy")
+    import struct
+
+    from skpcd.io import read_las_extent, read_point_cloud, write_point_cloud
+
+    rng = np.random.default_rng(0)
+    points = rng.uniform(0, 100, (20000, 3)) * [1, 1, 0.05]
+    path = tmp_path / "scene.las"
+    write_point_cloud(path, points)
+    data = bytearray(path.read_bytes())
+    data[179:187] = struct.pack("<d", 50.0)  # max x
+    data[195:203] = struct.pack("<d", 40.0)  # max y
+    path.write_bytes(bytes(data))
+    assert read_las_extent(path).maxs[:2].tolist() == [50.0, 40.0]
+    with tile_scene(path, 20.0, buffer=2.0, temp_folder=tmp_path) as tiles:
+        assert tiles.grid.shape == (5, 5)
+        assert tiles.owned_counts().sum() == len(points)
+    kwargs = {"ground": None, "eps": 1.5, "min_cluster_size": 5}
+    a = segment_scene(read_point_cloud(path), **kwargs)
+    b = segment_scene(path, tile_size=20.0, temp_folder=tmp_path, **kwargs)
+    assert a.n_segments > 10
+    assert np.array_equal(a.labels, b.labels)
