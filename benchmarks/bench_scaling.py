@@ -254,7 +254,7 @@ class _Cluster:
                 n_workers=n_workers,
                 threads_per_worker=threads_per_worker,
                 processes=True,
-                dashboard_address=None,
+                dashboard_address=":0",
                 silence_logs=40,
             )
             self.client = Client(self.cluster)
@@ -464,47 +464,64 @@ def bench_segments(a):
     }
 
 
-def bench_scene(a, tmp):
-    path = Path(a.scene_file) if a.scene_file else Path(tmp) / "scene.las"
-    if a.scene_file and path.exists():
+def _scene_file(path, n_points, reuse):
+    if reuse and path.exists():
         import laspy
 
         with laspy.open(str(path)) as f:
             scene = {"path": str(path), "n_points": int(f.header.point_count)}
         print(f"scene: reusing {path} ({scene['n_points']} points)", flush=True)
-    else:
-        scene = write_scene(path, a.scene_points)
-        print(
-            f"scene: {scene['n_points']} points, {scene['bytes'] / 2**30:.2f} GB, "
-            f"written in {scene['seconds']:.0f} s",
-            flush=True,
-        )
+        return scene
+    scene = write_scene(path, n_points)
+    print(
+        f"scene: {scene['n_points']} points, {scene['bytes'] / 2**30:.2f} GB, "
+        f"written in {scene['seconds']:.0f} s",
+        flush=True,
+    )
+    return scene
+
+
+def bench_scene(a, tmp):
+    folder = Path(a.scene_folder) if a.scene_folder else Path(tmp)
+    folder.mkdir(parents=True, exist_ok=True)
+    scenes = {
+        "large": _scene_file(folder / "scene.las", a.scene_points, a.scene_folder)
+    }
     tiles = [float(t) for t in a.tile_sizes.split(",") if t]
     configs = [c for c in a.configs.split(",") if c]
-    cases = [(c, t) for t in tiles for c in configs]
+    # every configuration with the first tile size; the other tile sizes, the
+    # smaller scan and the untiled run on the plain local path only
+    cases = [("large", c, tiles[0]) for c in configs]
+    cases += [("large", "local", t) for t in tiles[1:]]
+    if a.small_scene_points:
+        scenes["small"] = _scene_file(
+            folder / "scene_small.las", a.small_scene_points, a.scene_folder
+        )
+        cases.append(("small", "local", tiles[0]))
     if a.untiled:
-        cases.append(("local", 0.0))
-    runs = {f"{c}@{t:g}": [] for c, t in cases}
+        cases.append(("large", "local", 0.0))
+    runs = {f"{s}:{c}@{t:g}": [] for s, c, t in cases}
     labels = {}
     for rep in range(a.scene_repeat):
-        for c, t in cases if rep % 2 == 0 else cases[::-1]:
-            key = f"{c}@{t:g}"
-            out = Path(tmp) / f"labels_{c}_{t:g}.npy"
+        for s, c, t in cases if rep % 2 == 0 else cases[::-1]:
+            key = f"{s}:{c}@{t:g}"
+            out = Path(tmp) / f"labels_{s}_{c}_{t:g}.npy"
             spec = {
                 "part": "scene",
                 "config": c,
-                "path": str(path),
+                "path": scenes[s]["path"],
                 "tile_size": t,
                 "eps": a.eps,
-                "labels_out": str(out) if rep == 0 else None,
+                "labels_out": str(out) if rep == 0 and s == "large" else None,
                 **CONFIGS[c],
             }
             r = run_worker(spec, timeout=a.timeout)
+            r["n_points"] = scenes[s]["n_points"]
             runs[key].append(r)
-            if rep == 0 and "failed" not in r:
+            if spec["labels_out"] and "failed" not in r:
                 labels[key] = out
             print(f"scene {key} run {rep + 1}: {_brief(r)}", flush=True)
-    # partitions: every run against the first tiled one
+    # partitions of the large scan: every run against the first one
     same = {}
     keys = list(labels)
     if keys:
@@ -513,7 +530,7 @@ def bench_scene(a, tmp):
             same[k] = bool(np.array_equal(ref, np.load(labels[k], mmap_mode="r")))
         same["reference"] = keys[0]
     return {
-        "scene": scene,
+        "scenes": scenes,
         "eps": a.eps,
         "tile_sizes": tiles,
         "runs": runs,
@@ -563,9 +580,21 @@ def main(argv=None):
     ap.add_argument("--max-points", type=int, default=1024)
     ap.add_argument("--chunk", type=int, default=10_000, help="segments per call")
     ap.add_argument("--repeat", type=int, default=3, help="runs of each segments case")
+    ap.add_argument(
+        "--segments-key",
+        default="segments",
+        help="key of the segments results in the JSON (several runs side by side)",
+    )
     ap.add_argument("--scene-points", type=float, default=50e6)
     ap.add_argument(
-        "--scene-file", help="LAS file of the scene: reused if it exists, else kept"
+        "--small-scene-points",
+        type=float,
+        default=20e6,
+        help="a smaller scan tiled the same way (0: none)",
+    )
+    ap.add_argument(
+        "--scene-folder",
+        help="keep the LAS scenes here and reuse them (default: a temporary folder)",
     )
     ap.add_argument("--tile-sizes", default="100,200", help="metres, comma list")
     ap.add_argument("--eps", type=float, default=None, help="fixed eps (None: auto)")
@@ -582,7 +611,7 @@ def main(argv=None):
         return 0
     if a.quick:
         a.n_segments, a.chunk, a.repeat = 2000, 1000, 1
-        a.scene_points, a.tile_sizes = 3e6, "100"
+        a.scene_points, a.small_scene_points, a.tile_sizes = 3e6, 1e6, "100"
     out = Path(a.out)
     R = json.loads(out.read_text()) if out.exists() else {}
     R["machine"] = {
@@ -642,8 +671,8 @@ def report(R):
         "memory   peak RSS in MB (VmHWM, reset after start-up and warm-up), "
         "with the rise above the warm RSS in parentheses",
     ]
-    S = R.get("segments")
-    if S:
+    for key in sorted(k for k in R if k.startswith("segments")):
+        S = R[key]
         b = S["best"]
         lines += [
             "",
@@ -693,34 +722,41 @@ def report(R):
         )
     C = R.get("scene")
     if C:
-        sc = C["scene"]
+        lines += ["", "Tiled segmentation of LAS scenes (DALES copies on one terrain)"]
+        for name, sc in C["scenes"].items():
+            lines.append(
+                f"{name:<6} {sc['n_points'] / 1e6:.1f} M points"
+                + (
+                    f", {sc['copies']} copies of the DALES scene of "
+                    f"{sc['copy_points'] / 1e6:.2f} M points, "
+                    f"{sc['extent_m'][0]:.0f} x {sc['extent_m'][1]:.0f} m, "
+                    f"{sc['bytes'] / 2**30:.2f} GB, written in {sc['seconds']:.0f} s"
+                    if "copies" in sc
+                    else ""
+                )
+            )
         lines += [
-            "",
-            f"Tiled segmentation of a {sc['n_points'] / 1e6:.1f} M point LAS scene "
-            + (
-                f"({sc['copies']} copies of the DALES scene, "
-                f"{sc['extent_m'][0]:.0f} x {sc['extent_m'][1]:.0f} m, "
-                f"{sc['bytes'] / 2**30:.2f} GB)"
-                if "copies" in sc
-                else ""
-            ),
             f"{C['date']}; load average {C['loadavg_start']} at start, "
             f"{C['loadavg_end']} at end; eps "
-            + ("estimated once" if C["eps"] is None else f"{C['eps']}"),
+            + ("estimated once per scan" if C["eps"] is None else f"{C['eps']}"),
             f"command  {C['command']}",
-            f"{'config':<8} {'tile m':>6} {'s':>7} {'Mpoints/s':>9} {'segments':>8} "
-            f"{'start s':>7} {'driver MB':>14}  workers MB",
+            f"{'scan':<6} {'config':<8} {'tile m':>6} {'s':>7} {'Mpoints/s':>9} "
+            f"{'segments':>8} {'vs local':>8} {'start s':>7} {'driver MB':>14}  "
+            "workers MB",
         ]
         for key, r in C["best"].items():
-            c, t = key.split("@")
+            scan, rest = key.split(":")
+            c, t = rest.split("@")
+            local = C["best"].get(f"{scan}:local@{t}", {}).get("seconds")
             t = "none" if float(t) == 0 else t
             if "failed" in r:
-                lines.append(f"{c:<8} {t:>6} failed: {r['failed']}")
+                lines.append(f"{scan:<6} {c:<8} {t:>6} failed: {r['failed']}")
                 continue
+            ratio = f"{r['seconds'] / local:.2f}x" if local else "-"
             lines.append(
-                f"{c:<8} {t:>6} {r['seconds']:>7.1f} "
-                f"{sc['n_points'] / r['seconds'] / 1e6:>9.2f} {r['n_segments']:>8} "
-                f"{r['cluster_start_seconds']:>7.1f} "
+                f"{scan:<6} {c:<8} {t:>6} {r['seconds']:>7.1f} "
+                f"{r['n_points'] / r['seconds'] / 1e6:>9.2f} {r['n_segments']:>8} "
+                f"{ratio:>8} {r['cluster_start_seconds']:>7.1f} "
                 f"{r['driver_peak_mb']:>6.0f} (+{r['driver_above_warm_mb']:.0f})"
                 f"  {_workers_cell(r)}"
             )
