@@ -36,7 +36,8 @@ the objects it is judged on:
    (``eps_scale=1``) and a fixed 1.2 m; plus the same scenes with the
    objects 2 m apart, to show the limit of the default.
 
-Run from the repository root (about 5 minutes on 2 cores)::
+Run from the repository root (6.5 minutes on the shared 2-core VM; about
+half of it for the mobile-like scenes)::
 
     python benchmarks/bench_segmentation_quality.py
 
