@@ -13,24 +13,16 @@ To see how well it works we need a scene whose objects we know:
 with gaps between them, holes in the ground and noise points.
 """
 
-import os
-from pathlib import Path
-
 import matplotlib.pyplot as plt
 import numpy as np
 from sklearn.metrics import adjusted_rand_score
 
-from skpcd.datasets import make_urban_objects
-from skpcd.io import read_segments
+from skpcd.datasets import load_dales_objects
 from skpcd.segmentation import AutoEpsDBSCAN, make_scene, plot_eps_curve, segment_scene
 
-folder = Path(os.environ.get("SKPCD_DALES_DIR", "../../shared/data/dales_objects"))
-if (folder / "labels.csv").is_file():
-    clouds, labels, _ = read_segments(folder, folder / "labels.csv")
-    source = "DALES objects"
-else:  # no real data here: the embedded synthetic objects
-    clouds, labels = make_urban_objects(n_per_class=40, random_state=0)
-    source = "synthetic urban objects"
+# The real DALES objects where SKPCD_DALES_DIR points to them, else synthetic stand-ins.
+objects = load_dales_objects(synthetic_if_missing=True, n_per_class=40)
+clouds, labels, source = objects.data, objects.target, objects.source
 
 rng = np.random.default_rng(0)
 pick = np.concatenate(
