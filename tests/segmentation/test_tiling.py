@@ -153,6 +153,7 @@ def test_tiled_euclidean_without_ground_and_from_a_las_file(scene, tmp_path):
     b = segment_scene(path, tile_size=TILE, temp_folder=tmp_path, **kwargs)
     assert a.n_segments > 5
     assert np.array_equal(a.labels, b.labels)
+    assert np.array_equal(segment_scene(path, **kwargs).labels, a.labels)
     assert not b.ground.any()
     assert sorted(os.listdir(tmp_path)) == ["scene.las"]
 
