@@ -28,7 +28,7 @@ from sklearn.utils.validation import check_is_fitted
 from threadpoolctl import threadpool_limits
 
 from skpcd.utils import check_point_clouds
-from skpcd.utils._parallel import effective_threads
+from skpcd.utils._parallel import effective_threads, map_batches
 
 __all__ = ["BagOfFeatures"]
 
@@ -183,7 +183,10 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
     n_jobs : int, default=None
         Threads for the clustering, the word assignment and the approximate
         index; None means 1, -1 all cores. The output does not depend on
-        it.
+        it. Under a backend chosen with :func:`joblib.parallel_config`
+        (e.g. ``"dask"``), the word counts are computed in batches of
+        clouds (a descriptor counts as a point), run at once (None: the
+        backend's), each on the cores left to its task.
 
     Attributes
     ----------
@@ -386,9 +389,9 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
         index.prepare()
         return index
 
-    def _assign(self, block):
-        """Word index of each row of ``block``."""
-        n_threads = effective_threads(self.n_jobs)
+    def _assign(self, block, n_jobs):
+        """Word index of each row of ``block``, on ``n_jobs`` threads."""
+        n_threads = effective_threads(n_jobs)
         if self.assignment_ == "exact":
             with threadpool_limits(n_threads, user_api="openmp"):
                 return pairwise_distances_argmin(
@@ -412,10 +415,16 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
         return indices[:, 0].astype(np.intp)
 
     def _counts(self, descs):
+        """Word counts of each descriptor array, batches of arrays on the
+        joblib backend chosen by the caller, if any."""
+        return map_batches(self._counts_batch, descs, self.n_jobs)
+
+    def _counts_batch(self, descs, n_jobs):
+        """Word counts of a batch of descriptor arrays, one row each."""
         n_words = len(self.vocabulary_)
         counts = np.zeros((len(descs), n_words))
         for first, ids, block in _batches(descs, _BATCH_ROWS):
-            words = self._assign(block)
+            words = self._assign(block, n_jobs)
             n_seg = int(ids[-1]) + 1
             flat = np.bincount(ids * n_words + words, minlength=n_seg * n_words)
             counts[first : first + n_seg] += flat.reshape(n_seg, n_words)

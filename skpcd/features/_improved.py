@@ -10,7 +10,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from skpcd.preprocessing._normals import _normals_f32, pack_neighborhoods
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
-from skpcd.utils._parallel import parallel_rows
+from skpcd.utils._parallel import map_batches, parallel_rows
 
 __all__ = ["ImprovedPFHTransformer"]
 
@@ -58,7 +58,11 @@ class ImprovedPFHTransformer(CloudTransformer):
         normal (fewer than 3 points, collinear points), or all points are
         at the middle point.
     n_jobs : int, default=None
-        Threads for the neighbour search, the normals and the descriptor.
+        Threads for the neighbour search, the normals and the descriptor;
+        None means 1, -1 all cores. Under a backend chosen with
+        :func:`joblib.parallel_config` (e.g. ``"dask"``): the batches of
+        clouds run at once (None: the backend's), each on the cores left
+        to its task.
 
     Attributes
     ----------
@@ -185,24 +189,28 @@ class ImprovedPFHTransformer(CloudTransformer):
             summing to 100 (per block for ``"fpfh"``); undefined segments
             get NaN or zeros (``undefined``).
         """
+        clouds = self._validate(X)
+        return map_batches(self._transform_batch, clouds, self.n_jobs)
+
+    def _transform_batch(self, clouds, n_jobs):
+        """:meth:`transform` of validated clouds (one batch of them)."""
         from skpcd.features._pfh_kernels import improved_rows
 
-        clouds = self._validate(X)
         k = self.n_neighbors
         if k is None and self.radius is None:
             k = 10
         xyz, offsets, nb = pack_neighborhoods(
-            clouds, n_neighbors=k, radius=self.radius, n_jobs=self.n_jobs,
+            clouds, n_neighbors=k, radius=self.radius, n_jobs=n_jobs,
             with_sqdist=False,
         )  # fmt: skip
         p = xyz.astype(np.float32)
-        n = _normals_f32(p, nb, np.zeros(3), self.n_jobs)[0]
+        n = _normals_f32(p, nb, np.zeros(3), n_jobs)[0]
         del nb
         n_bins, mode = self._bins(), 0 if self.variant == "pfh" else 1
         out = np.zeros((len(clouds), self._width()))
         middle = MIDDLES.index(self.middle)
         args = (offsets, xyz, p, n, middle, n_bins, mode, out)
-        parallel_rows(improved_rows, len(clouds), self.n_jobs, *args)
+        parallel_rows(improved_rows, len(clouds), n_jobs, *args)
         # counts to percentages: per row, or per block of the "fpfh" variant
         blocks = out.reshape(len(out), 1 if mode == 0 else 3, -1)
         total = blocks.sum(axis=2, keepdims=True)

@@ -8,6 +8,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
+from skpcd.utils._parallel import map_batches
 
 __all__ = ["OverallDescriptor", "box_dimensions"]
 
@@ -128,6 +129,10 @@ class OverallDescriptor(CloudTransformer):
             Columns named by :meth:`get_feature_names_out`.
         """
         clouds = check_point_clouds(X)
+        return map_batches(self._transform_batch, clouds)
+
+    def _transform_batch(self, clouds, n_jobs):
+        """:meth:`transform` of validated clouds (one batch of them)."""
         rows = np.empty((len(clouds), len(OVERALL_NAMES)))
         m = float(self.min_extent)
         for r, c in enumerate(clouds):

@@ -23,6 +23,7 @@ from skpcd.preprocessing._normals import (
 from skpcd.utils import check_point_clouds
 from skpcd.utils._parallel import (
     effective_threads,
+    map_batches,
     parallel_rows,
     release_free_memory,
 )
@@ -484,17 +485,14 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         self.n_features_in_ = clouds[0].shape[1]
         return self._transform(X, clouds)
 
-    def _compute(self, X, clouds=None):
+    def _compute(self, clouds, n_jobs):
         """Packed descriptors, the undefined-point mask and the cloud offsets
-        (``clouds``: X already validated)."""
-        self._check_search()
-        if clouds is None:
-            clouds = self._validate(X)
+        of validated clouds, the kernels on ``n_jobs`` threads."""
         k = self.n_neighbors
         if k is None and self.radius is None:
             k = self._default_n_neighbors
         xyz, offsets, nb = pack_neighborhoods(
-            clouds, n_neighbors=k, radius=self.radius, n_jobs=self.n_jobs,
+            clouds, n_neighbors=k, radius=self.radius, n_jobs=n_jobs,
             with_sqdist=False,
         )  # fmt: skip
         p = xyz.astype(np.float32)
@@ -507,11 +505,11 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
                     clouds,
                     n_neighbors=self.normal_n_neighbors,
                     radius=self.normal_radius,
-                    n_jobs=self.n_jobs,
+                    n_jobs=n_jobs,
                     with_sqdist=False,
                 )
             vp = _check_viewpoint(self.viewpoint)
-            n = _normals_f32(p, nnb, vp, self.n_jobs)[0]
+            n = _normals_f32(p, nnb, vp, n_jobs)[0]
             del nnb
         del xyz  # the descriptors work in float32
         undefined = ~np.isfinite(n).all(axis=1) | (nb.sizes < 2)
@@ -522,7 +520,7 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         # the search's temporaries are freed: return their pages to the system
         # before the kernels allocate the output (lower peak memory)
         release_free_memory()
-        out = self._kernel(p, normals, nb)
+        out = self._kernel(p, normals, nb, n_jobs)
         return out, undefined, offsets
 
     def undefined_mask(self, X):
@@ -543,7 +541,12 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         masks : list of ndarray of bool of shape (n_points_i,)
             True for the points whose descriptor is undefined.
         """
-        _, undefined, offsets = self._compute(X)
+        self._check_search()
+        clouds = self._validate(X)
+        return map_batches(self._undefined_batch, clouds, self.n_jobs)
+
+    def _undefined_batch(self, clouds, n_jobs):
+        _, undefined, offsets = self._compute(clouds, n_jobs)
         return [undefined[offsets[i] : offsets[i + 1]] for i in range(len(offsets) - 1)]
 
     def transform(self, X):
@@ -564,7 +567,14 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         return self._transform(X)
 
     def _transform(self, X, clouds=None):
-        out, undefined, offsets = self._compute(X, clouds)
+        self._check_search()
+        if clouds is None:
+            clouds = self._validate(X)
+        return map_batches(self._transform_batch, clouds, self.n_jobs)
+
+    def _transform_batch(self, clouds, n_jobs):
+        """:meth:`transform` of validated clouds (one batch of them)."""
+        out, undefined, offsets = self._compute(clouds, n_jobs)
         if self.undefined == "nan":
             out[undefined] = np.nan
         elif self.undefined == "zero":
@@ -649,7 +659,9 @@ _COMMON_PARAMS = """
         list of per-point arrays.
     n_jobs : int, default=None
         Threads for the searches and the kernels; None means 1, -1 all
-        cores.
+        cores. Under a backend chosen with :func:`joblib.parallel_config`
+        (e.g. ``"dask"``): the batches of clouds run at once (None: the
+        backend's), each on the cores left to its task.
 """
 
 
@@ -735,24 +747,21 @@ class PFHTransformer(_LocalDescriptor):
     def _width(self):
         return int(self.n_bins) ** 3
 
-    def _compute(self, X, clouds=None):
+    def _compute(self, clouds, n_jobs):
         if self.radius is None or not (
             self.normal_n_neighbors is None and self.normal_radius is None
         ):
-            return super()._compute(X, clouds)
+            return super()._compute(clouds, n_jobs)
         # radius search: neighbourhoods block by block (memory)
-        self._check_search()
-        if clouds is None:
-            clouds = self._validate(X)
         normals = None
         if self.normals == "columns":
             normals = np.vstack([c[:, 3:6] for c in clouds]).astype(np.float32)
         vp = _check_viewpoint(self.viewpoint)
-        args = (float(self.radius), int(self.n_bins), normals, vp, self.n_jobs)
+        args = (float(self.radius), int(self.n_bins), normals, vp, n_jobs)
         return _pfh_radius_blocked(clouds, *args)
 
-    def _kernel(self, p, normals, nb):
-        return _pfh_packed(p, normals.pop(), nb, int(self.n_bins), self.n_jobs)
+    def _kernel(self, p, normals, nb, n_jobs):
+        return _pfh_packed(p, normals.pop(), nb, int(self.n_bins), n_jobs)
 
 
 class FPFHTransformer(_LocalDescriptor):
@@ -831,12 +840,10 @@ class FPFHTransformer(_LocalDescriptor):
     def _width(self):
         return 3 * int(self.n_bins)
 
-    def _kernel(self, p, normals, nb):
+    def _kernel(self, p, normals, nb, n_jobs):
         n_bins = int(self.n_bins)
-        counts, table = _spfh_counts(
-            p, normals.pop(), nb, n_bins, self.n_jobs, pack=True
-        )
+        counts, table = _spfh_counts(p, normals.pop(), nb, n_bins, n_jobs, pack=True)
         # the normals are gone: hand their pages back before the output
         release_free_memory()
-        args = (p, counts, table, nb, n_bins, self.convention, self.n_jobs)
+        args = (p, counts, table, nb, n_bins, self.convention, n_jobs)
         return _fpfh_from_counts(*args)

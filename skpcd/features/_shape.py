@@ -7,6 +7,7 @@ import numpy as np
 from skpcd.features._overall import box_dimensions
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
+from skpcd.utils._parallel import map_batches
 
 __all__ = ["ShapeFeatures", "shape_features"]
 
@@ -107,6 +108,11 @@ def shape_features(points):
     )
 
 
+def _shape_batch(clouds, n_jobs):
+    """The features of a batch of clouds, one row each."""
+    return np.vstack([shape_features(c) for c in clouds])
+
+
 class ShapeFeatures(CloudTransformer):
     """Global shape features of each segment (size, eigenvalues, height profile).
 
@@ -176,7 +182,7 @@ class ShapeFeatures(CloudTransformer):
             One row per segment.
         """
         clouds = check_point_clouds(X)
-        return np.vstack([shape_features(c) for c in clouds])
+        return map_batches(_shape_batch, clouds)
 
     def get_feature_names_out(self, input_features=None):
         """Names of the output features.

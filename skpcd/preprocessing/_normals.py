@@ -12,7 +12,7 @@ from skpcd.preprocessing._neighbors import (
 )
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
-from skpcd.utils._parallel import parallel_rows
+from skpcd.utils._parallel import map_batches, parallel_rows
 
 __all__ = ["NormalEstimator", "estimate_normals"]
 
@@ -159,7 +159,10 @@ class NormalEstimator(CloudTransformer):
     include_curvature : bool, default=False
         Also append the curvature as column 6.
     n_jobs : int, default=None
-        Threads; None means 1, -1 all cores.
+        Threads; None means 1, -1 all cores. Under a backend chosen with
+        :func:`joblib.parallel_config` (e.g. ``"dask"``): the batches of
+        clouds run at once (None: the backend's), each on the cores left
+        to its task.
 
     Attributes
     ----------
@@ -221,11 +224,16 @@ class NormalEstimator(CloudTransformer):
             xyz, the normals, and the curvature if asked.
         """
         clouds = check_point_clouds(X)
+        _check_viewpoint(self.viewpoint)
+        return map_batches(self._transform_batch, clouds, self.n_jobs)
+
+    def _transform_batch(self, clouds, n_jobs):
+        """:meth:`transform` of validated clouds (one batch of them)."""
         vp = _check_viewpoint(self.viewpoint)
         xyz, offsets, neighborhoods = pack_neighborhoods(
-            clouds, n_neighbors=self.n_neighbors, radius=self.radius, n_jobs=self.n_jobs
+            clouds, n_neighbors=self.n_neighbors, radius=self.radius, n_jobs=n_jobs
         )
-        normals, curvature = _normals_packed(xyz, neighborhoods, vp, self.n_jobs)
+        normals, curvature = _normals_packed(xyz, neighborhoods, vp, n_jobs)
         cols = [xyz, normals] + ([curvature[:, None]] if self.include_curvature else [])
         out = np.hstack(cols)
         return [out[offsets[i] : offsets[i + 1]] for i in range(len(clouds))]
