@@ -261,7 +261,9 @@ def _task_threads(n_threads, hosts):
         worker = get_worker()
     except (ImportError, ValueError):  # not on a worker
         return n_threads
-    busy = hosts.get(get_address_host(worker.address), 0) or worker.state.nthreads
+    busy = hosts.get(get_address_host(worker.address), 0)
+    if not busy:  # a worker that joined since: its own threads
+        busy = getattr(getattr(worker, "state", worker), "nthreads", 1)
     return max(1, cpu_count() // max(busy, 1))
 
 
