@@ -114,10 +114,13 @@ def segment_scene(
     random_state : int, RandomState instance or None, default=0
         Draws the points of the eps estimate.
     n_jobs : int, default=None
-        Threads; None means 1, -1 all cores. With ``tile_size``, the threads
-        of each tile; inside ``joblib.parallel_config(backend=...)`` (for
-        example ``backend="dask"`` with a ``dask.distributed.Client``) the
-        tiles are dispatched through joblib instead, one thread each.
+        Threads; None means 1, -1 all cores. With ``tile_size``, the tiles
+        run one after the other, each on ``n_jobs`` threads, unless a joblib
+        backend is chosen (``joblib.parallel_config(backend=...)``, for
+        example ``backend="dask"`` with a ``dask.distributed.Client``):
+        then the tiles are dispatched through joblib, ``n_jobs`` at once
+        (None: the context's; all worker threads on Dask), each on the
+        cores left to its task (as the batches of the descriptors).
     tile_size : float or None, default=None
         None segments the scene in memory. A number cuts it into square
         tiles of that side (in metres), spilled to temporary files and

@@ -513,30 +513,39 @@ def _cluster_tile(xyz, owned, eps, min_samples, n_jobs):
 # --- tiled segmentation ---------------------------------------------------
 
 
-def _backend_chosen():
-    """Whether the caller chose a joblib backend (``parallel_config``)."""
-    from joblib import parallel
-
-    config = getattr(parallel._backend, "config", None) or {}
-    return not isinstance(
-        config.get("backend", parallel.default_parallel_config["backend"]),
-        type(parallel.default_parallel_config["backend"]),
-    )
+def _tile_call(job, n_threads):
+    func, args = job
+    return func(*args, n_threads)
 
 
 def _map(func, jobs, n_jobs):
-    """``func(*args)`` for the argument tuples of ``jobs``, in order, lazily:
-    in this process with ``n_jobs`` threads per call unless a joblib backend
-    was chosen, then through :class:`sklearn.utils.parallel.Parallel` (on a
-    Dask cluster inside ``parallel_config(backend="dask")``), one kernel
-    thread per call."""
-    if not _backend_chosen():
+    """``func(*args, n_threads)`` for the argument tuples of ``jobs``, in
+    order, lazily (one tile in memory at a time, or one per running task).
+
+    As :func:`skpcd.utils._parallel.map_batches`, of which this is the
+    streaming form for tiles: in this process with ``n_jobs`` threads per
+    call unless a joblib backend was chosen (``parallel_config``); then
+    through :class:`sklearn.utils.parallel.Parallel` (on a Dask cluster
+    inside ``parallel_config(backend="dask")``), ``n_jobs`` tiles at once
+    (None: the context's), each with the cores left to its task.
+    """
+    from skpcd.utils._parallel import _chosen_backend, _dask_hosts, _run_batch
+
+    backend = _chosen_backend()
+    if backend is None:
         for args in jobs:
             yield func(*args, n_jobs)
         return
+    from joblib import cpu_count, effective_n_jobs
     from sklearn.utils.parallel import Parallel, delayed
 
-    yield from Parallel(return_as="generator")(delayed(func)(*args, 1) for args in jobs)
+    n_tasks = max(1, int(effective_n_jobs(n_jobs)))
+    inner = getattr(backend, "inner_max_num_threads", None)
+    n_threads = inner or max(1, cpu_count() // n_tasks)
+    hosts = None if inner else _dask_hosts(backend)
+    yield from Parallel(n_jobs=n_jobs, batch_size=1, return_as="generator")(
+        delayed(_run_batch)(_tile_call, (func, args), n_threads, hosts) for args in jobs
+    )
 
 
 def _ground_job(xyz, owned, filt, raster, n_jobs):
