@@ -496,6 +496,12 @@ def test_segment_tiled_writes_the_untiled_files(tmp_path, capsys, ext):
     whole = _tree_bytes(tmp_path / "whole")
     assert len(whole) > 5
     assert _tree_bytes(tmp_path / "tiles") == whole  # no temporary file left
+    # the folder of segments can be described as is (segments.csv is skipped)
+    npz = tmp_path / "d.npz"
+    desc = ["describe", str(tmp_path / "tiles"), "-o", str(npz), "--quiet"]
+    assert main([*desc, "--descriptors", "shape"]) == 0
+    with np.load(npz) as d:
+        assert d["shape"].shape[0] == len(whole) - 1
     with pytest.raises(SystemExit, match="2 \\* eps"):
         main([*tiled, "--overwrite", "--tile-size", "12", "--tile-buffer", "1"])
 

@@ -260,7 +260,9 @@ def _list_files(folder_or_glob, labels_path):
         files = [
             p
             for p in Path(source).iterdir()
-            if p.is_file() and p.suffix.lower() in _FORMATS and p.name != "labels.csv"
+            if p.is_file()
+            and p.suffix.lower() in _FORMATS
+            and p.name not in ("labels.csv", "segments.csv")
         ]
         root = Path(source)
     else:
@@ -320,7 +322,8 @@ def read_segments(
     ----------
     folder_or_glob : str or path-like
         A folder (every file with a supported extension in it, not
-        recursively, except one named ``labels.csv``) or a glob pattern such
+        recursively, except ``labels.csv`` and ``segments.csv``, the
+        summary written by ``skpcd segment``) or a glob pattern such
         as ``"scans/**/*.ply"``.
     labels : str or path-like, default=None
         A CSV file of ``file,label`` rows (a ``file,label`` header line is
