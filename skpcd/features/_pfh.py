@@ -209,15 +209,15 @@ def _pfh_radius_blocked(clouds, radius, n_bins, normals_from, viewpoint, n_jobs)
     """
     from skpcd.features._pfh_kernels import ROW_MIN
     from skpcd.preprocessing import _grid_kernels as g
-    from skpcd.preprocessing._neighbors import _build_grid, _grid_shape
+    from skpcd.preprocessing._neighbors import build_grid, grid_shape
 
     release_free_memory()  # e.g. the pages of a previous call's output
     offsets = np.zeros(len(clouds) + 1, dtype=np.int64)
     np.cumsum([len(c) for c in clouds], out=offsets[1:])
     xyz = np.ascontiguousarray(np.vstack([c[:, :3] for c in clouds]), dtype=np.float64)
     n_pts = len(xyz)
-    origin, h, dims = _grid_shape(xyz, offsets, np.full(len(clouds), radius))
-    order, cells = _build_grid(xyz, offsets, origin, h, dims)
+    origin, h, dims = grid_shape(xyz, offsets, np.full(len(clouds), radius))
+    order, cells = build_grid(xyz, offsets, origin, h, dims)
     xs = g.gather_rows(xyz, order)
     p = xyz.astype(np.float32)
     del xyz
