@@ -543,9 +543,9 @@ def _map(func, jobs, n_jobs):
     inner = getattr(backend, "inner_max_num_threads", None)
     n_threads = inner or max(1, cpu_count() // n_tasks)
     hosts = None if inner else _dask_hosts(backend)
-    yield from Parallel(n_jobs=n_jobs, batch_size=1, return_as="generator")(
-        delayed(_run_batch)(_tile_call, (func, args), n_threads, hosts) for args in jobs
-    )
+    yield from Parallel(
+        n_jobs=n_jobs, batch_size=1, pre_dispatch="n_jobs", return_as="generator"
+    )(delayed(_run_batch)(_tile_call, (func, args), n_threads, hosts) for args in jobs)
 
 
 def _ground_job(xyz, owned, filt, raster, n_jobs):
