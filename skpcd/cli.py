@@ -417,6 +417,13 @@ def _add_segmentation_options(p):
     )
     p.add_argument("--eps", type=float, default=None, help="clustering radius (m)")
     p.add_argument(
+        "--eps-scale",
+        type=float,
+        default=2.5,
+        help="dbscan without --eps: the radius is this multiple of the knee "
+        "distance of the k-distance curve (default 2.5)",
+    )
+    p.add_argument(
         "--min-samples", type=int, default=5, help="DBSCAN core count (default 5)"
     )
     p.add_argument(
@@ -454,6 +461,7 @@ def _segment_file(args, command, fields=None):
             ground=None if args.ground == "none" else args.ground,
             method=args.method,
             eps=args.eps,
+            eps_scale=args.eps_scale,
             min_samples=args.min_samples,
             min_cluster_size=args.min_size,
             max_cluster_size=args.max_size,

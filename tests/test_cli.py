@@ -270,6 +270,21 @@ def test_identify_writes_the_labelled_scene(tmp_path, capsys):
         main(args)
 
 
+def test_segment_eps_scale_sets_the_estimated_radius(tmp_path, capsys):
+    import re
+
+    scene = tmp_path / "scene.ply"
+    _scene_file(scene)
+    eps = {}
+    for scale in ("1", "2.5"):
+        out = tmp_path / f"segs{scale}"
+        args = ["segment", str(scene), "-o", str(out), "--eps-scale", scale]
+        assert main(args) == 0
+        printed = capsys.readouterr().out
+        eps[scale] = float(re.search(r"eps ([0-9.]+)\)", printed).group(1))
+    assert eps["2.5"] == pytest.approx(2.5 * eps["1"], abs=2e-3)
+
+
 def test_segment_and_identify_bad_inputs(tmp_path, capsys):
     assert main(["segment", str(tmp_path / "missing.ply"), "-o", str(tmp_path)]) == 1
     assert "error" in capsys.readouterr().err

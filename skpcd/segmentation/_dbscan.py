@@ -52,6 +52,20 @@ def _kdist_curve(xyz, n_neighbors, max_samples, random_state, n_jobs):
     return np.arange(1, k_max + 1), dist[:, 1:].mean(axis=0)
 
 
+def eps_from_knee(knee_distance, eps_scale):
+    """The radius: ``eps_scale`` times the knee distance, which must be > 0.
+
+    The one place of this rule, for :class:`AutoEpsDBSCAN` and the tiled
+    estimate of :func:`~skpcd.segmentation.segment_scene`.
+    """
+    if not knee_distance > 0:
+        raise ValueError(
+            "cannot estimate eps: the points' nearest-neighbour distances are "
+            "all zero (duplicated points); give eps"
+        )
+    return float(eps_scale) * float(knee_distance)
+
+
 def _fit_knee(k, mean, degree):
     """Polynomial fitted to the curve, and the k where it is farthest from
     its chord (both axes scaled to [0, 1]): ``(poly, knee_k, eps)``."""
@@ -322,15 +336,10 @@ class AutoEpsDBSCAN(ClusterMixin, BaseEstimator):
             xyz, self.n_neighbors, self.max_samples, self.random_state, self.n_jobs
         )
         poly, knee, knee_distance = _fit_knee(k, mean, self.degree)
-        if not knee_distance > 0:
-            raise ValueError(
-                "cannot estimate eps: the points' nearest-neighbour distances are "
-                "all zero (duplicated points); give eps"
-            )
         self.curve_k_, self.curve_distances_ = k, mean
         self.curve_, self.knee_ = poly, knee
         self.knee_distance_ = knee_distance
-        return float(self.eps_scale) * knee_distance
+        return eps_from_knee(knee_distance, self.eps_scale)
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, X, y=None):

@@ -19,7 +19,7 @@ from skpcd.segmentation._clusters import (
     check_scene,
     filter_cluster_sizes,
 )
-from skpcd.segmentation._dbscan import AutoEpsDBSCAN
+from skpcd.segmentation._dbscan import EPS_SCALE, AutoEpsDBSCAN
 from skpcd.segmentation._ground import GROUND_PRESETS, GroundFilter
 
 __all__ = ["SceneSegmentation", "make_scene", "segment_scene"]
@@ -55,6 +55,7 @@ class SceneSegmentation(typing.NamedTuple):
         "ground": [StrOptions(set(GROUND_PRESETS)), GroundFilter, None],
         "method": [StrOptions({"dbscan", "euclidean"})],
         "eps": [Interval(Real, 0, None, closed="neither"), None],
+        "eps_scale": [Interval(Real, 0, None, closed="neither")],
         "min_samples": [Interval(Integral, 1, None, closed="left")],
         "min_cluster_size": [Interval(Integral, 1, None, closed="left")],
         "max_cluster_size": [Interval(Integral, 1, None, closed="left"), None],
@@ -72,6 +73,7 @@ def segment_scene(
     ground="aerial",
     method="dbscan",
     eps=None,
+    eps_scale=EPS_SCALE,
     min_samples=5,
     min_cluster_size=50,
     max_cluster_size=None,
@@ -105,6 +107,12 @@ def segment_scene(
         0.2 unless given).
     eps : float or None, default=None
         Clustering radius; see ``method``.
+    eps_scale : float, default=2.5
+        With ``method="dbscan"`` and ``eps=None``, the estimated radius is
+        this multiple of the knee distance of :class:`AutoEpsDBSCAN`
+        (chosen by cross-validation on scenes of real objects; lower it for
+        objects closer together than about ``eps_scale`` times the point
+        spacing). Ignored when ``eps`` is given.
     min_samples : int, default=5
         DBSCAN's core-point count (ignored by "euclidean").
     min_cluster_size : int, default=50
@@ -219,6 +227,7 @@ def segment_scene(
                 method=method,
                 eps=None if eps is None else float(eps),
                 min_samples=min_samples,
+                eps_scale=eps_scale,
                 min_cluster_size=min_cluster_size,
                 max_cluster_size=max_cluster_size,
                 random_state=random_state,
@@ -241,7 +250,11 @@ def segment_scene(
         return SceneSegmentation(labels, is_ground, float(eps or 0.0))
     if method == "dbscan":
         est = AutoEpsDBSCAN(
-            eps=eps, min_samples=min_samples, random_state=random_state, n_jobs=n_jobs
+            eps=eps,
+            eps_scale=eps_scale,
+            min_samples=min_samples,
+            random_state=random_state,
+            n_jobs=n_jobs,
         ).fit(xyz[rest])
         used = est.eps_
         sub = est.labels_

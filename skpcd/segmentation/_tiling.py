@@ -557,8 +557,9 @@ def _cluster_job(xyz, owned, eps, min_samples, n_jobs):
 
 
 def _estimate_eps(
-    scene, tiles, load, is_ground, min_samples, random_state, n_jobs, chunk_size
-):
+    scene, tiles, load, is_ground, min_samples, eps_scale, random_state, n_jobs,
+    chunk_size,
+):  # fmt: skip
     """The eps of :class:`AutoEpsDBSCAN` for the non-ground points of the
     whole scan, computed tile by tile: the same random sample of query points
     as the untiled estimate (drawn among all non-ground points, in scan
@@ -570,10 +571,12 @@ def _estimate_eps(
     from scipy.spatial import cKDTree
     from sklearn.utils import check_random_state
 
-    from skpcd.segmentation._dbscan import AutoEpsDBSCAN, _fit_knee
+    from skpcd.segmentation._dbscan import AutoEpsDBSCAN, _fit_knee, eps_from_knee
     from skpcd.utils._parallel import effective_threads
 
-    est = AutoEpsDBSCAN(min_samples=min_samples, random_state=random_state)
+    est = AutoEpsDBSCAN(
+        min_samples=min_samples, eps_scale=eps_scale, random_state=random_state
+    )
     n = 0
     for start in range(0, scene.n_points, chunk_size):
         n += int((~is_ground[start : start + chunk_size]).sum())
@@ -616,14 +619,8 @@ def _estimate_eps(
         )
     mean = dist[:, 1:].mean(axis=0)
     _, _, knee_distance = _fit_knee(np.arange(1, k_max + 1), mean, est.degree)
-    if not knee_distance > 0:
-        raise ValueError(
-            "cannot estimate eps: the points' nearest-neighbour distances are "
-            "all zero (duplicated points); give eps"
-        )
-    # AutoEpsDBSCAN._estimate's last step (a multiple of the knee distance
-    # since eps_scale exists; test_tiling checks the two estimates agree)
-    return float(getattr(est, "eps_scale", 1.0)) * float(knee_distance)
+    # as AutoEpsDBSCAN._estimate (test_tiling checks the two estimates agree)
+    return eps_from_knee(knee_distance, est.eps_scale)
 
 
 def _result_array(folder, name, n, dtype, fill):
@@ -655,6 +652,7 @@ def segment_tiled(
     max_cluster_size,
     random_state,
     n_jobs,
+    eps_scale,
     chunk_size=1_000_000,
     temp_folder=None,
 ):
@@ -741,8 +739,8 @@ def segment_tiled(
         # 2. eps, once for the whole scan (see _estimate_eps)
         if eps is None:
             eps = _estimate_eps(
-                scene, tiles, load, is_ground, min_samples, random_state, n_jobs,
-                chunk_size,
+                scene, tiles, load, is_ground, min_samples, eps_scale,
+                random_state, n_jobs, chunk_size,
             )  # fmt: skip
             if 2 * eps > buffer:
                 raise ValueError(
