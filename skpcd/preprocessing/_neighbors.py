@@ -306,11 +306,6 @@ def grid_shape(xyz, cloud_ptr, h, lo_hi=None):
     return lo, h, dims
 
 
-# The old private names, still imported by skpcd.features._pfh.
-_build_grid = build_grid
-_grid_shape = grid_shape
-
-
 def _knn_grid(xyz, cloud_ptr, k):
     """Grid for k-nearest searches, cell sizes adapted to each cloud's density.
 

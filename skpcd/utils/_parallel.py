@@ -137,7 +137,7 @@ def batch_config(*, batch_points=None):
     >>> import joblib
     >>> from skpcd.datasets import make_point_clouds
     >>> from skpcd.features import FPFHTransformer
-    >>> from skpcd.utils._parallel import batch_config
+    >>> from skpcd.utils import batch_config
     >>> clouds = make_point_clouds(4, n_points=50, random_state=0)
     >>> with joblib.parallel_config(backend="threading", n_jobs=2):
     ...     with batch_config(batch_points=100):  # 2 clouds per batch
