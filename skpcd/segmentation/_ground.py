@@ -237,7 +237,7 @@ class GroundFilter(BaseEstimator):
                 f"cells of {self.cell}; use a larger cell"
             )
         zmin = np.full((ny, nx), np.inf)
-        cell_minimum(xyz, lo[0], lo[1], float(self.cell), zmin)
+        cell_minimum(xyz, lo[0], lo[1], float(self.cell), nx, ny, 0, 0, zmin)
         return lo, zmin
 
     def _drop_low_noise(self, zmin, known):
@@ -310,7 +310,9 @@ class GroundFilter(BaseEstimator):
         from skpcd.segmentation._ground_kernels import bilinear
 
         out = np.empty(len(xyz))
-        bilinear(xyz, self.origin_[0], self.origin_[1], float(self.cell), grid, out)
+        ny, nx = grid.shape
+        x0, y0 = self.origin_
+        bilinear(xyz, x0, y0, float(self.cell), nx, ny, 0, 0, grid, out)
         return out
 
     def _ground(self, xyz):

@@ -19,7 +19,8 @@ from numbers import Integral, Real
 from pathlib import Path
 
 import numpy as np
-from numba import njit
+
+from skpcd.segmentation._ground_kernels import bilinear, cell_minimum
 
 __all__ = ["TileGrid", "TiledScene", "tile_scene"]
 
@@ -419,43 +420,6 @@ def tile_scene(
 # --- the ground filter on a window of the scene's raster -------------------
 
 
-@njit(cache=True, nogil=True)
-def _window_minimum(xyz, x0, y0, cell, nx, ny, c0, r0, zmin):
-    """``cell_minimum`` of the whole scene's raster (origin ``x0, y0``,
-    ``nx`` x ``ny`` cells), kept for the window starting at cell ``(r0,
-    c0)``: the same cell of every point as in the whole raster."""
-    wy, wx = zmin.shape
-    for i in range(len(xyz)):
-        c = min(max(math.floor((xyz[i, 0] - x0) / cell), 0), nx - 1) - c0
-        r = min(max(math.floor((xyz[i, 1] - y0) / cell), 0), ny - 1) - r0
-        if 0 <= c < wx and 0 <= r < wy and xyz[i, 2] < zmin[r, c]:
-            zmin[r, c] = xyz[i, 2]
-
-
-@njit(cache=True, nogil=True)
-def _window_bilinear(xyz, x0, y0, cell, nx, ny, c0, r0, grid, out):
-    """``bilinear`` of the whole scene's raster, read from the window
-    ``grid`` of it starting at cell ``(r0, c0)``: the same cells and
-    weights as on the whole raster wherever they fall in the window."""
-    wy, wx = grid.shape
-    for i in range(len(xyz)):
-        u = (xyz[i, 0] - x0) / cell - 0.5
-        v = (xyz[i, 1] - y0) / cell - 0.5
-        u = min(max(u, 0.0), nx - 1.0)
-        v = min(max(v, 0.0), ny - 1.0)
-        c = min(int(u), max(nx - 2, 0))
-        r = min(int(v), max(ny - 2, 0))
-        fu = u - c if nx > 1 else 0.0
-        fv = v - r if ny > 1 else 0.0
-        c1 = min(max(min(c + 1, nx - 1) - c0, 0), wx - 1)
-        r1 = min(max(min(r + 1, ny - 1) - r0, 0), wy - 1)
-        c = min(max(c - c0, 0), wx - 1)
-        r = min(max(r - r0, 0), wy - 1)
-        top = grid[r, c] * (1.0 - fu) + grid[r, c1] * fu
-        bottom = grid[r1, c] * (1.0 - fu) + grid[r1, c1] * fu
-        out[i] = top * (1.0 - fv) + bottom * fv
-
-
 def _window_filter(base):
     """A GroundFilter class fitted on a window of the whole scene's raster."""
     from skpcd.segmentation._ground import GroundFilter
@@ -469,13 +433,13 @@ def _window_filter(base):
         def _minimum_surface(self, xyz):
             x0, y0, nx, ny, c0, r0, wx, wy = self._raster
             zmin = np.full((wy, wx), np.inf)
-            _window_minimum(xyz, x0, y0, float(self.cell), nx, ny, c0, r0, zmin)
+            cell_minimum(xyz, x0, y0, float(self.cell), nx, ny, c0, r0, zmin)
             return np.array([x0 + c0 * self.cell, y0 + r0 * self.cell]), zmin
 
         def _at(self, grid, xyz):
             x0, y0, nx, ny, c0, r0, _, _ = self._raster
             out = np.empty(len(xyz))
-            _window_bilinear(xyz, x0, y0, float(self.cell), nx, ny, c0, r0, grid, out)
+            bilinear(xyz, x0, y0, float(self.cell), nx, ny, c0, r0, grid, out)
             return out
 
     return _WindowGroundFilter(**base.get_params())
