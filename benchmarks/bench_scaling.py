@@ -165,7 +165,7 @@ def write_scene(path, n_points, *, seed=0):
             writer.write_points(rec)
             total += len(xyz)
             del xyz, rec, lift
-    return {
+    meta = {
         "path": str(path),
         "n_points": total,
         "copies": n_copies,
@@ -175,6 +175,8 @@ def write_scene(path, n_points, *, seed=0):
         "bytes": os.path.getsize(path),
         "seconds": time.perf_counter() - start,
     }
+    Path(path).with_suffix(".json").write_text(json.dumps(meta))
+    return meta
 
 
 # ----------------------------------------------------------------------------
@@ -468,8 +470,10 @@ def _scene_file(path, n_points, reuse):
     if reuse and path.exists():
         import laspy
 
+        meta = path.with_suffix(".json")
+        scene = json.loads(meta.read_text()) if meta.exists() else {}
         with laspy.open(str(path)) as f:
-            scene = {"path": str(path), "n_points": int(f.header.point_count)}
+            scene.update(path=str(path), n_points=int(f.header.point_count))
         print(f"scene: reusing {path} ({scene['n_points']} points)", flush=True)
         return scene
     scene = write_scene(path, n_points)
@@ -543,9 +547,26 @@ def _brief(r):
     if "failed" in r:
         return f"FAILED {r['failed']}: {r.get('stderr', '')}"
     w = ", ".join(f"{x['above_warm_mb']:.0f}" for x in r["workers"])
-    return f"{r['seconds']:.1f} s, driver peak +{r['driver_above_warm_mb']:.0f} MB" + (
-        f", workers +[{w}] MB" if w else ""
+    extra = f", {r['n_segments']} segments, eps {r['eps']:.4f}" if "eps" in r else ""
+    return (
+        f"{r['seconds']:.1f} s, driver peak +{r['driver_above_warm_mb']:.0f} MB"
+        + (f", workers +[{w}] MB" if w else "")
+        + extra
     )
+
+
+def _commit():
+    """HEAD of the repository, and whether skpcd/ has uncommitted changes."""
+
+    def git(*args):
+        return subprocess.run(
+            ["git", *args], cwd=HERE.parent, capture_output=True, text=True
+        ).stdout.strip()
+
+    return {
+        "head": git("rev-parse", "--short", "HEAD"),
+        "skpcd_dirty": bool(git("status", "--porcelain", "--", "skpcd")),
+    }
 
 
 def _versions():
@@ -627,6 +648,7 @@ def main(argv=None):
         sys.argv[1:] if argv is None else argv
     )
     parts = set(a.parts.split(","))
+    R["commit"] = _commit()
     with tempfile.TemporaryDirectory() as tmp:
         if "segments" in parts:
             load = _loadavg()
@@ -668,6 +690,12 @@ def report(R):
         "Scaling out: plain local against a Dask LocalCluster (1 and 2 workers)",
         f"machine  {m['cpu']}, {m['cores']} cores, {m['memory_gb']} GB",
         "versions " + ", ".join(f"{k} {x}" for k, x in v.items()),
+        "code     commit {head}{dirty}".format(
+            head=R.get("commit", {}).get("head", "?"),
+            dirty=" (skpcd/ with uncommitted changes)"
+            if R.get("commit", {}).get("skpcd_dirty")
+            else "",
+        ),
         "memory   peak RSS in MB (VmHWM, reset after start-up and warm-up), "
         "with the rise above the warm RSS in parentheses",
     ]
@@ -752,7 +780,7 @@ def report(R):
             if "failed" in r:
                 lines.append(f"{scan:<6} {c:<8} {t:>6} failed: {r['failed']}")
                 continue
-            ratio = f"{r['seconds'] / local:.2f}x" if local else "-"
+            ratio = f"{r['seconds'] / local:.2f}x" if local and c != "local" else "-"
             lines.append(
                 f"{scan:<6} {c:<8} {t:>6} {r['seconds']:>7.1f} "
                 f"{r['n_points'] / r['seconds'] / 1e6:>9.2f} {r['n_segments']:>8} "

@@ -20,6 +20,7 @@ from dask.distributed import Client, LocalCluster, get_task_stream
 
 from skpcd.datasets import load_dales_objects
 from skpcd.features import PFHTransformer
+from skpcd.utils import batch_config
 
 # The real DALES objects where SKPCD_DALES_DIR points to them, else synthetic stand-ins.
 objects = load_dales_objects(synthetic_if_missing=True, n_per_class=20)
@@ -39,8 +40,9 @@ print(f"local: {local.shape} in {time.perf_counter() - start:.2f} s")
 # %%
 # The same call on two worker processes of one thread each. Each batch's kernels
 # get the cores of the machine divided by the worker threads on it (here 1), so
-# the two workers do not oversubscribe the cores. The task stream records where
-# every batch ran.
+# the two workers do not oversubscribe the cores. Batches are at most a million
+# points by default; :func:`~skpcd.utils.batch_config` makes them smaller here, so
+# that each worker gets several. The task stream records where every batch ran.
 with (
     LocalCluster(
         n_workers=2,
@@ -54,7 +56,11 @@ with (
     # load the kernels in the workers (from numba's cache)
     client.run(PFHTransformer(n_neighbors=10).fit_transform, clouds[:3])
     start = time.perf_counter()
-    with get_task_stream(client) as stream, joblib.parallel_config(backend="dask"):
+    with (
+        get_task_stream(client) as stream,
+        joblib.parallel_config(backend="dask"),
+        batch_config(batch_points=50_000),
+    ):
         on_dask = pfh.fit_transform(clouds)
     print(f"dask:  {on_dask.shape} in {time.perf_counter() - start:.2f} s")
     tasks = [t for t in stream.data if "run_batch" in t["key"]]
