@@ -226,11 +226,7 @@ class TiledScene:
         index : ndarray of shape (n_tile_points,), dtype int64
             Their indices in the scan, ascending.
         """
-        path = self.path(tile)
-        if not path.exists():
-            return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
-        records = np.fromfile(path, dtype=_RECORD)
-        return np.ascontiguousarray(records["xyz"]), records["index"].copy()
+        return _load_tile(self.path(tile))
 
     def close(self):
         """Delete the temporary files."""
@@ -241,6 +237,14 @@ class TiledScene:
 
     def __exit__(self, *exc):
         self.close()
+
+
+def _load_tile(path):
+    """``(xyz, index)`` of a tile file (empty arrays when it does not exist)."""
+    if not os.path.exists(path):
+        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+    records = np.fromfile(path, dtype=_RECORD)
+    return np.ascontiguousarray(records["xyz"]), records["index"].copy()
 
 
 def _is_path(source):
@@ -454,7 +458,27 @@ def ground_reach(filt):
     return (2 * radius + 4) * filt.cell
 
 
-def _ground_tile(xyz, owned, filt, raster):
+def _ground_prepare(xyz, index, ground, tile, grid, lo, nxy, cell, reach):
+    """The points of a buffered tile in the cells of its core square grown by
+    the ground filter's reach, with the window of the scene's raster they
+    span; and the scan indices of the tile's own points."""
+    owned = grid.owner(xyz) == tile
+    x0, y0, x1, y1 = grid.core_bounds(tile)
+    start = np.floor((np.array([x0, y0]) - reach - lo) / cell).astype(np.int64)
+    stop = np.floor((np.array([x1, y1]) + reach - lo) / cell).astype(np.int64)
+    start = np.clip(start, 0, nxy - 1)
+    stop = np.clip(stop, 0, nxy - 1)
+    cells = np.clip(np.floor((xyz[:, :2] - lo) / cell), 0, nxy - 1).astype(np.int64)
+    sel = np.all((cells >= start) & (cells <= stop), axis=1)
+    raster = (
+        float(lo[0]), float(lo[1]), int(nxy[0]), int(nxy[1]),
+        int(start[0]), int(start[1]),
+        int(stop[0] - start[0] + 1), int(stop[1] - start[1] + 1),
+    )  # fmt: skip
+    return (np.ascontiguousarray(xyz[sel]), owned[sel], raster), index[owned]
+
+
+def _ground_tile(xyz, owned, raster, filt, n_threads):
     """Ground flags of the owned points of a buffered tile."""
     est = _window_filter(filt)
     est._raster = raster
@@ -464,27 +488,194 @@ def _ground_tile(xyz, owned, filt, raster):
     return est.ground_[owned]
 
 
-def _cluster_tile(xyz, owned, eps, min_samples, n_jobs):
+def _cluster_prepare(xyz, index, ground, tile, grid, reach):
+    """The non-ground points of a buffered tile within ``reach`` of its core
+    square (and its own points); their scan indices and which are its own."""
+    owned = grid.owner(xyz) == tile
+    x0, y0, x1, y1 = grid.core_bounds(tile)
+    x, y = xyz[:, 0], xyz[:, 1]
+    sel = (
+        (x >= x0 - reach) & (x <= x1 + reach)
+        & (y >= y0 - reach) & (y <= y1 + reach)
+    )  # fmt: skip
+    sel |= owned
+    sel &= ~ground
+    return (np.ascontiguousarray(xyz[sel]), owned[sel]), (index[sel], owned[sel])
+
+
+def _cluster_tile(xyz, owned, eps, min_samples, n_threads):
     """DBSCAN of the non-ground points of a buffered tile: labels of the
     owned points, and the positions and labels of the other core points."""
     from skpcd.segmentation._clusters import grid_dbscan
 
-    labels, core = grid_dbscan(xyz, eps, min_samples, n_jobs=n_jobs)
+    labels, core = grid_dbscan(xyz, eps, min_samples, n_jobs=n_threads)
     shared = np.flatnonzero(core & ~owned)
     return labels[owned], shared, labels[shared]
 
 
+def _eps_prepare(xyz, index, ground, tile, grid, queries):
+    """The non-ground points of a buffered tile and, among its own points,
+    the queries of the eps estimate; the scan indices of those."""
+    mine = np.flatnonzero(grid.owner(xyz) == tile)
+    mine = mine[np.isin(index[mine], queries)]
+    if not len(mine):
+        return (np.zeros((0, 3)), np.zeros((0, 3))), index[mine]
+    return (np.ascontiguousarray(xyz[~ground]), xyz[mine]), index[mine]
+
+
+def _eps_tile(points, queries, k, n_threads):
+    """Distances from each query to its ``k`` nearest ``points`` (itself
+    first)."""
+    from scipy.spatial import cKDTree
+
+    if not len(queries):
+        return np.zeros((0, k))
+    tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
+    d, _ = tree.query(queries, k=k, workers=n_threads)
+    return d.reshape(len(queries), -1)
+
+
 # --- tiled segmentation ---------------------------------------------------
+#
+# Each pass (ground, eps, clusters) maps a function over the tiles in two
+# steps: ``prepare(xyz, index, ground, tile, *pargs)`` cuts from the buffered
+# tile what the pass needs, returning ``(args, info)``, and
+# ``compute(*args, *cargs, n_threads)`` does the work; ``info`` (scan
+# indices) tells the driver where the result goes. In this process, or when
+# the tasks of a joblib backend see this machine's files, each task reads
+# its tile from the spill file and prepares it itself (the driver only
+# sends the tile's name); else the driver reads and prepares the tile and
+# ships the prepared arrays.
+
+
+class _TileRef(typing.NamedTuple):
+    """A tile for a task to read itself: its spill file, the scene's token
+    (file, content) that proves the task sees this machine's files, and
+    the scene's ground flags file (None when the pass does not need it)."""
+
+    path: str
+    token: tuple
+    ground: str | None
+
+
+def _read_ref(ref):
+    """``(xyz, index, ground)`` of a tile reference, or None when the token
+    file is not there with the same content (another machine's files)."""
+    try:
+        with open(ref.token[0], encoding="ascii") as f:
+            if f.read() != ref.token[1]:
+                return None
+        xyz, index = _load_tile(ref.path)
+        ground = None
+        if ref.ground is not None:
+            ground = np.asarray(np.load(ref.ground, mmap_mode="r")[index])
+    except OSError:
+        return None
+    return xyz, index, ground
+
+
+_HEAP = []
+
+
+def _heap_for_arrays():
+    """Let glibc serve array temporaries from the heap in a Dask worker.
+
+    A Dask nanny starts its worker with ``MALLOC_TRIM_THRESHOLD_`` set,
+    which also fixes glibc's mmap threshold at 128 KiB: every temporary
+    array above that is then a fresh mapping whose pages the kernel faults
+    in and zeroes, which made the tile steps two to three times slower on a
+    worker than in the driver. Raising the threshold to glibc's own upper
+    bound (32 MiB) undoes that; the heap is still trimmed after each tile
+    (:func:`~skpcd.utils._parallel.release_free_memory`), which is what the
+    setting is for. Once per process, and only where the variable is set.
+    """
+    if _HEAP:
+        return _HEAP[0]
+    ok = False
+    if "MALLOC_TRIM_THRESHOLD_" in os.environ:
+        try:
+            import ctypes
+
+            ok = bool(ctypes.CDLL("libc.so.6").mallopt(-3, 32 * 2**20))
+        except (OSError, AttributeError):  # not glibc
+            ok = False
+    _HEAP.append(ok)
+    return ok
 
 
 def _tile_call(job, n_threads):
-    func, args = job
-    return func(*args, n_threads)
+    """One tile of :func:`_map_tiles`: ``(info, result)``; ``info`` is None
+    for a shipped tile (the driver has it), and None is returned for a
+    tile reference the task cannot read."""
+    if _heap_for_arrays():
+        from skpcd.utils._parallel import release_free_memory
+
+        try:
+            return _tile_call_inner(job, n_threads)
+        finally:
+            release_free_memory()
+    return _tile_call_inner(job, n_threads)
 
 
-def _map(func, jobs, n_jobs):
-    """``func(*args, n_threads)`` for the argument tuples of ``jobs``, in
-    order, lazily (one tile in memory at a time, or one per running task).
+def _tile_call_inner(job, n_threads):
+    tile, t, prepare, pargs, compute, cargs = job
+    if isinstance(tile, _TileRef):
+        data = _read_ref(tile)
+        if data is None:
+            return None
+        tile, info = prepare(*data, t, *pargs)
+        return info, compute(*tile, *cargs, n_threads)
+    return None, compute(*tile, *cargs, n_threads)
+
+
+_LOCAL_BACKENDS = ("ThreadingBackend", "LokyBackend", "MultiprocessingBackend")
+
+
+def _local_hosts():
+    """Names and addresses of this machine."""
+    import socket
+
+    names = {"127.0.0.1", "localhost", "::1", "0.0.0.0"}
+    try:
+        host = socket.gethostname()
+        names.add(host)
+        names.update(socket.gethostbyname_ex(host)[2])
+    except OSError:  # pragma: no cover - no name resolution
+        pass
+    return names
+
+
+def _shares_files(backend):
+    """Whether the tasks of a joblib ``backend`` run on this machine, so that
+    they can read the tile files: joblib's own backends (threads and
+    processes here), and Dask when every worker has an address of this
+    machine (a ``LocalCluster``). Any other backend gets shipped tiles."""
+    from skpcd.utils._parallel import _dask_hosts
+
+    if type(backend).__name__ in _LOCAL_BACKENDS:
+        return True
+    hosts = _dask_hosts(backend)
+    return bool(hosts) and set(hosts) <= _local_hosts()
+
+
+def _scene_token(scene):
+    """``(file, content)`` of a random token written in the scene's folder."""
+    token = getattr(scene, "_token", None)
+    if token is None:
+        import secrets
+
+        token = (str(scene.folder / "token"), secrets.token_hex(16))
+        with open(token[0], "w", encoding="ascii") as f:
+            f.write(token[1])
+        scene._token = token
+    return token
+
+
+def _map_tiles(scene, tiles, prepare, pargs, compute, cargs, n_jobs, ground=None):
+    """``(info, compute(*args, *cargs, n_threads))`` for each tile of
+    ``tiles``, ``(args, info) = prepare(xyz, index, ground[index], tile,
+    *pargs)``, in order, lazily (one tile in memory at a time, or one per
+    running task).
 
     As :func:`skpcd.utils._parallel.map_batches`, of which this is the
     streaming form for tiles: in this process with ``n_jobs`` threads per
@@ -492,13 +683,39 @@ def _map(func, jobs, n_jobs):
     through :class:`sklearn.utils.parallel.Parallel` (on a Dask cluster
     inside ``parallel_config(backend="dask")``), ``n_jobs`` tiles at once
     (None: the context's), each with the cores left to its task.
+
+    On a backend whose tasks run on this machine (:func:`_shares_files`),
+    a task gets the tile's name and reads and prepares the tile itself,
+    and up to two tiles per running task are sent ahead; the driver reads
+    nothing. A task that does not find the scene's token (a worker with
+    other files under the same name) returns None: that tile, and those
+    already sent, are then computed here, and the following ones shipped.
+    Elsewhere the driver reads and prepares each tile and ships its arrays,
+    one tile per running task in flight. ``ground`` is ``(flags, path)``:
+    the scan's ground flags and the file they are mapped from (flushed
+    before the tasks read it), or None.
     """
-    from skpcd.utils._parallel import _chosen_backend, _dask_hosts, _run_batch
+    import collections
+
+    from skpcd.utils._parallel import (
+        _chosen_backend,
+        _dask_hosts,
+        _run_batch,
+        effective_threads,
+    )
+
+    flags, flags_path = (None, None) if ground is None else ground
+
+    def here(t, n_threads):
+        xyz, index = scene.load(t)
+        g = None if flags is None else np.asarray(flags[index])
+        args, info = prepare(xyz, index, g, t, *pargs)
+        return info, compute(*args, *cargs, n_threads)
 
     backend = _chosen_backend()
     if backend is None:
-        for args in jobs:
-            yield func(*args, n_jobs)
+        for t in tiles:
+            yield here(t, n_jobs)
         return
     from joblib import cpu_count, effective_n_jobs
     from sklearn.utils.parallel import Parallel, delayed
@@ -507,21 +724,43 @@ def _map(func, jobs, n_jobs):
     inner = getattr(backend, "inner_max_num_threads", None)
     n_threads = inner or max(1, cpu_count() // n_tasks)
     hosts = None if inner else _dask_hosts(backend)
-    yield from Parallel(
-        n_jobs=n_jobs, batch_size=1, pre_dispatch="n_jobs", return_as="generator"
-    )(delayed(_run_batch)(_tile_call, (func, args), n_threads, hosts) for args in jobs)
+    shared = [_shares_files(backend)]
+    if shared[0]:
+        token = _scene_token(scene)
+        if flags is not None:
+            flags.flush()
+    pending = collections.deque()
 
+    def jobs():
+        for t in tiles:
+            if shared[0]:
+                tile = _TileRef(str(scene.path(t)), token, flags_path)
+                job = (tile, t, prepare, pargs, compute, cargs)
+                pending.append((t, None))
+            else:
+                xyz, index = scene.load(t)
+                g = None if flags is None else np.asarray(flags[index])
+                tile, info = prepare(xyz, index, g, t, *pargs)
+                del xyz, index, g
+                job = (tile, t, None, (), compute, cargs)
+                pending.append((t, info))
+            yield delayed(_run_batch)(_tile_call, job, n_threads, hosts)
 
-def _ground_job(xyz, owned, filt, raster, n_jobs):
-    return _ground_tile(xyz, owned, filt, raster)
-
-
-def _cluster_job(xyz, owned, eps, min_samples, n_jobs):
-    return _cluster_tile(xyz, owned, eps, min_samples, n_jobs)
+    pre_dispatch = "2 * n_jobs" if shared[0] else "n_jobs"
+    for out in Parallel(
+        n_jobs=n_jobs, batch_size=1, pre_dispatch=pre_dispatch, return_as="generator"
+    )(jobs()):
+        t, info = pending.popleft()
+        if out is None:  # the task did not see our files: here, then ship
+            shared[0] = False
+            yield here(t, effective_threads(n_jobs))
+            continue
+        mine, result = out
+        yield (info if mine is None else mine), result
 
 
 def _estimate_eps(
-    scene, tiles, load, is_ground, min_samples, eps_scale, random_state, n_jobs,
+    scene, tiles, ground, min_samples, eps_scale, random_state, n_jobs,
     chunk_size,
 ):  # fmt: skip
     """The eps of :class:`AutoEpsDBSCAN` for the non-ground points of the
@@ -532,12 +771,11 @@ def _estimate_eps(
     closer than the buffer (else a warning says the estimate may differ)."""
     import warnings
 
-    from scipy.spatial import cKDTree
     from sklearn.utils import check_random_state
 
     from skpcd.segmentation._dbscan import AutoEpsDBSCAN, _fit_knee, eps_from_knee
-    from skpcd.utils._parallel import effective_threads
 
+    is_ground = ground[0]
     est = AutoEpsDBSCAN(
         min_samples=min_samples, eps_scale=eps_scale, random_state=random_state
     )
@@ -562,17 +800,13 @@ def _estimate_eps(
     queries = np.concatenate(queries)
     dist = np.empty((len(queries), k_max + 1))
     farthest = 0.0
-    for t in tiles:
-        xyz, index, owned = load(t)
-        mine = np.flatnonzero(owned)
-        mine = mine[np.isin(index[mine], queries)]
-        if not len(mine):
-            continue
-        rest = ~is_ground[index]
-        tree = cKDTree(xyz[rest], balanced_tree=False, compact_nodes=False)
-        d, _ = tree.query(xyz[mine], k=k_max + 1, workers=effective_threads(n_jobs))
-        dist[np.searchsorted(queries, index[mine])] = d.reshape(len(mine), -1)
-        farthest = max(farthest, float(d.max()))
+    for index, d in _map_tiles(
+        scene, tiles, _eps_prepare, (scene.grid, queries), _eps_tile,
+        (k_max + 1,), n_jobs, ground=ground,
+    ):  # fmt: skip
+        if len(index):
+            dist[np.searchsorted(queries, index)] = d
+            farthest = max(farthest, float(d.max()))
     if farthest > scene.grid.buffer:
         warnings.warn(
             f"the eps estimate searched neighbours up to {farthest:g} away, beyond "
@@ -661,9 +895,7 @@ def segment_tiled(
         is_ground = _result_array(out, "ground.npy", n, np.bool_, False)
         labels = _result_array(out, "labels.npy", n, np.int64, -1)
 
-        def load(t):
-            xyz, index = scene.load(t)
-            return xyz, index, grid.owner(xyz) == t
+        ground_flags = (is_ground, str(out / "ground.npy"))
 
         # 1. ground: each tile's filter on the cells of its core square grown
         # by the filter's reach, cut from the raster of the whole scene
@@ -671,39 +903,16 @@ def segment_tiled(
             cell = float(ground.cell)
             lo = scene.mins[:2]
             nxy = (np.floor((scene.maxs[:2] - lo) / cell) + 1).astype(np.int64)
-
-            def ground_jobs():
-                for t in tiles:
-                    xyz, index, owned = load(t)
-                    x0, y0, x1, y1 = grid.core_bounds(t)
-                    start = np.floor(
-                        (np.array([x0, y0]) - ground_buffer - lo) / cell
-                    ).astype(np.int64)
-                    stop = np.floor(
-                        (np.array([x1, y1]) + ground_buffer - lo) / cell
-                    ).astype(np.int64)
-                    start = np.clip(start, 0, nxy - 1)
-                    stop = np.clip(stop, 0, nxy - 1)
-                    cells = np.clip(
-                        np.floor((xyz[:, :2] - lo) / cell), 0, nxy - 1
-                    ).astype(np.int64)
-                    sel = np.all((cells >= start) & (cells <= stop), axis=1)
-                    raster = (
-                        float(lo[0]), float(lo[1]), int(nxy[0]), int(nxy[1]),
-                        int(start[0]), int(start[1]),
-                        int(stop[0] - start[0] + 1), int(stop[1] - start[1] + 1),
-                    )  # fmt: skip
-                    load.done.append(index[owned])
-                    yield np.ascontiguousarray(xyz[sel]), owned[sel], ground, raster
-
-            load.done = []
-            for flags in _map(_ground_job, ground_jobs(), n_jobs):
-                is_ground[load.done.pop(0)] = flags
+            for index, flags in _map_tiles(
+                scene, tiles, _ground_prepare, (grid, lo, nxy, cell, ground_buffer),
+                _ground_tile, (ground,), n_jobs,
+            ):  # fmt: skip
+                is_ground[index] = flags
 
         # 2. eps, once for the whole scan (see _estimate_eps)
         if eps is None:
             eps = _estimate_eps(
-                scene, tiles, load, is_ground, min_samples, eps_scale,
+                scene, tiles, ground_flags, min_samples, eps_scale,
                 random_state, n_jobs, chunk_size,
             )  # fmt: skip
             if 2 * eps > buffer:
@@ -718,27 +927,11 @@ def segment_tiled(
         # points shared with another tile link the two tiles' clusters
         if eps > 0:
             reach_c = 2 * eps * (1 + 1e-9) + 1e-9
-
-            def cluster_jobs():
-                for t in tiles:
-                    xyz, index, owned = load(t)
-                    x0, y0, x1, y1 = grid.core_bounds(t)
-                    x, y = xyz[:, 0], xyz[:, 1]
-                    sel = (
-                        (x >= x0 - reach_c) & (x <= x1 + reach_c)
-                        & (y >= y0 - reach_c) & (y <= y1 + reach_c)
-                    )  # fmt: skip
-                    sel |= owned
-                    sel &= ~is_ground[index]
-                    load.done.append((index[sel], owned[sel]))
-                    yield np.ascontiguousarray(xyz[sel]), owned[sel], eps, min_samples
-
-            load.done = []
             n_local, links = 0, []
-            for own_labels, shared, shared_labels in _map(
-                _cluster_job, cluster_jobs(), n_jobs
-            ):
-                index, owned = load.done.pop(0)
+            for (index, owned), (own_labels, shared, shared_labels) in _map_tiles(
+                scene, tiles, _cluster_prepare, (grid, reach_c), _cluster_tile,
+                (eps, min_samples), n_jobs, ground=ground_flags,
+            ):  # fmt: skip
                 labels[index[owned]] = np.where(
                     own_labels >= 0, own_labels + n_local, -1
                 )

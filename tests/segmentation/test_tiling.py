@@ -165,6 +165,51 @@ def test_tiled_on_a_joblib_backend(scene, untiled):
     assert np.array_equal(tiled.labels, untiled.labels)
 
 
+@pytest.mark.parametrize("where", ["shipped", "unseen"])
+def test_tiled_on_a_backend_that_cannot_read_the_tile_files(
+    scene, untiled, where, monkeypatch
+):
+    # "shipped": a backend on other machines (the driver reads and ships the
+    # tiles); "unseen": the tasks cannot read the files although the backend
+    # said they could (the driver computes those tiles, then ships)
+    import skpcd.segmentation._tiling as tiling
+
+    points, _ = scene
+    calls = []
+    if where == "shipped":
+        monkeypatch.setattr(tiling, "_shares_files", lambda backend: False)
+        monkeypatch.setattr(tiling, "_read_ref", lambda ref: calls.append(ref))
+    else:
+        monkeypatch.setattr(tiling, "_read_ref", lambda ref: calls.append(ref))
+    with joblib.parallel_config(backend="threading", n_jobs=2):
+        tiled = segment_scene(points, tile_size=TILE)
+    b = segment_scene(points)
+    assert tiled.eps == b.eps
+    assert np.array_equal(tiled.labels, b.labels)
+    assert np.array_equal(tiled.ground, b.ground)
+    # shipped: no task looked for the files
+    assert (len(calls) == 0) == (where == "shipped")
+
+
+class DaskDistributedBackend:  # the name joblib's Dask backend has
+    def __init__(self, addresses):
+        self.client = type("Client", (), {"ncores": lambda c: addresses})()
+
+
+def test_tasks_read_the_tile_files_only_on_this_machine():
+    from joblib._parallel_backends import LokyBackend, ThreadingBackend
+
+    from skpcd.segmentation._tiling import _shares_files
+
+    assert _shares_files(ThreadingBackend()) and _shares_files(LokyBackend())
+    here = {"tcp://127.0.0.1:40001": 1, "tcp://127.0.0.1:40002": 2}
+    assert _shares_files(DaskDistributedBackend(here))
+    there = {**here, "tcp://192.0.2.7:40003": 1}  # TEST-NET-1, not this machine
+    assert not _shares_files(DaskDistributedBackend(there))
+    assert not _shares_files(DaskDistributedBackend({}))
+    assert not _shares_files(object())
+
+
 def test_buffer_too_small_for_eps(scene):
     points, _ = scene
     with pytest.raises(ValueError, match="2 \\* eps"):
