@@ -35,10 +35,12 @@ turn (interleaved) ``--repeat`` times; the best time of each is kept.
     each object rigidly), so the copies join without steps. It is written
     copy by copy with laspy (the whole scene is never in memory). The file
     is segmented with ``segment_scene(path, tile_size=...)`` plain local
-    and on 1 and 2 Dask workers, with two tile sizes, and once without
-    tiles (the whole scan in memory) for contrast; the tiled labels of
-    every configuration are compared (equal up to the numbering of the
-    segments).
+    and on 1 and 2 Dask workers with the first of ``--tile-sizes``, plain
+    local with the others and on a smaller scan (``--small-scene-points``,
+    same tile size: the peak should not grow with the scan), and once
+    without tiles (the whole scan in memory) for contrast; the labels of
+    every run on the large scan are compared (equal up to the numbering of
+    the segments).
 
 Memory: peak RSS (``VmHWM``, reset through ``/proc/self/clear_refs`` after
 start-up and warm-up) of the driver process and of every worker process
