@@ -619,7 +619,7 @@ def main(argv=None):
         "--scene-folder",
         help="keep the LAS scenes here and reuse them (default: a temporary folder)",
     )
-    ap.add_argument("--tile-sizes", default="100,200", help="metres, comma list")
+    ap.add_argument("--tile-sizes", default="400,200", help="metres, comma list")
     ap.add_argument("--eps", type=float, default=None, help="fixed eps (None: auto)")
     ap.add_argument("--scene-repeat", type=int, default=1)
     ap.add_argument(
@@ -650,19 +650,18 @@ def main(argv=None):
         sys.argv[1:] if argv is None else argv
     )
     parts = set(a.parts.split(","))
-    R["commit"] = _commit()
     with tempfile.TemporaryDirectory() as tmp:
-        if "segments" in parts:
-            load = _loadavg()
-            R["segments"] = bench_segments(a)
-            R["segments"].update({"date": stamp, "command": cmd, "loadavg_start": load})
-            R["segments"]["loadavg_end"] = _loadavg()
-            _write(out, R)
-        if "scene" in parts:
-            load = _loadavg()
-            R["scene"] = bench_scene(a, tmp)
-            R["scene"].update({"date": stamp, "command": cmd, "loadavg_start": load})
-            R["scene"]["loadavg_end"] = _loadavg()
+        for part, key, bench in (
+            ("segments", a.segments_key, lambda: bench_segments(a)),
+            ("scene", "scene", lambda: bench_scene(a, tmp)),
+        ):
+            if part not in parts:
+                continue
+            start = {"date": stamp, "command": cmd, "loadavg_start": _loadavg()}
+            start["commit"] = _commit()
+            R[key] = bench()
+            R[key].update(start)
+            R[key]["loadavg_end"] = _loadavg()
             _write(out, R)
     print(report(R))
     return 0
@@ -676,6 +675,17 @@ def _write(out, R):
 
 # ----------------------------------------------------------------------------
 # report
+
+
+def _code(part):
+    c = part.get("commit") or {}
+    dirty = (
+        " (skpcd/ with uncommitted changes at the start)"
+        if c.get("skpcd_dirty")
+        else ""
+    )
+    note = f"; {c['note']}" if c.get("note") else ""
+    return f"code     commit {c.get('head', '?')}{dirty}{note}"
 
 
 def _workers_cell(r):
@@ -692,12 +702,6 @@ def report(R):
         "Scaling out: plain local against a Dask LocalCluster (1 and 2 workers)",
         f"machine  {m['cpu']}, {m['cores']} cores, {m['memory_gb']} GB",
         "versions " + ", ".join(f"{k} {x}" for k, x in v.items()),
-        "code     commit {head}{dirty}".format(
-            head=R.get("commit", {}).get("head", "?"),
-            dirty=" (skpcd/ with uncommitted changes)"
-            if R.get("commit", {}).get("skpcd_dirty")
-            else "",
-        ),
         "memory   peak RSS in MB (VmHWM, reset after start-up and warm-up), "
         "with the rise above the warm RSS in parentheses",
     ]
@@ -712,6 +716,7 @@ def report(R):
             f"{S['date']}; load average {S['loadavg_start']} at start, "
             f"{S['loadavg_end']} at end; best of {len(next(iter(S['runs'].values())))}",
             f"command  {S['command']}",
+            _code(S),
             f"{'config':<8} {'workers':>7} {'threads':>7} {'s':>7} {'segments/s':>10} "
             f"{'Mpoints/s':>9} {'vs local':>8} {'start s':>7} "
             f"{'driver MB':>14}  workers MB",
@@ -770,6 +775,7 @@ def report(R):
             f"{C['loadavg_end']} at end; eps "
             + ("estimated once per scan" if C["eps"] is None else f"{C['eps']}"),
             f"command  {C['command']}",
+            _code(C),
             f"{'scan':<6} {'config':<8} {'tile m':>6} {'s':>7} {'Mpoints/s':>9} "
             f"{'segments':>8} {'vs local':>8} {'start s':>7} {'driver MB':>14}  "
             "workers MB",
