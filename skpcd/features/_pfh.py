@@ -570,7 +570,10 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         self._check_search()
         if clouds is None:
             clouds = self._validate(X)
-        return map_batches(self._transform_batch, clouds, self.n_jobs)
+        # pooled: one row per cloud, so the per-point rows of one batch at a
+        # time, not of all clouds, are held (bounded memory)
+        bounded = self.pooling is not None
+        return map_batches(self._transform_batch, clouds, self.n_jobs, bounded=bounded)
 
     def _transform_batch(self, clouds, n_jobs):
         """:meth:`transform` of validated clouds (one batch of them)."""

@@ -290,7 +290,9 @@ def _concat(parts):
     return np.concatenate(parts, axis=0)
 
 
-def map_batches(func, items, n_jobs=None, *, sizes=None, batch_points=None):
+def map_batches(
+    func, items, n_jobs=None, *, sizes=None, batch_points=None, bounded=False
+):
     """``func(items, n_jobs)``, in batches of items on a joblib backend.
 
     Outside a :func:`joblib.parallel_config` context that chooses a
@@ -338,6 +340,12 @@ def map_batches(func, items, n_jobs=None, *, sizes=None, batch_points=None):
     batch_points : int, default=None
         Points per batch at most; None: the value of :func:`batch_config`,
         by default :data:`BATCH_POINTS`.
+    bounded : bool, default=False
+        Also cut the items into batches when no backend is chosen, and run
+        them one after the other in-process (each on ``n_jobs`` threads):
+        for functions whose result is much smaller than their temporaries
+        (pooled descriptors), so that peak memory is that of one batch, not
+        of all items.
 
     Returns
     -------
@@ -357,7 +365,7 @@ def map_batches(func, items, n_jobs=None, *, sizes=None, batch_points=None):
     [2, 3, 4]
     """
     backend = _chosen_backend() if len(items) else None
-    if backend is None:
+    if backend is None and not (bounded and len(items) > 1):
         return func(items, n_jobs)
     from joblib import cpu_count, effective_n_jobs
     from sklearn.utils.parallel import Parallel, delayed
@@ -372,6 +380,9 @@ def map_batches(func, items, n_jobs=None, *, sizes=None, batch_points=None):
         )
     if batch_points is None:
         batch_points = _BATCH_POINTS.get() or BATCH_POINTS
+    if backend is None:  # bounded, in-process: one batch after the other
+        bounds = batch_bounds(sizes, int(batch_points))
+        return _concat([func(items[lo:hi], n_jobs) for lo, hi in bounds])
     n_tasks = max(1, int(effective_n_jobs(n_jobs)))
     # every task gets work: at most the total divided by the tasks
     even = -(-int(sizes.sum()) // n_tasks)

@@ -112,6 +112,37 @@ def test_local_path_is_one_call():
     assert len(calls) == 1
 
 
+def test_bounded_local_path_runs_batches_in_turn():
+    clouds = [np.zeros((n, 3)) for n in (5, 6, 7)]
+    calls = []
+    out = map_batches(_record(calls), clouds, 2, batch_points=11, bounded=True)
+    assert out == [5, 6, 7]
+    # in-process, one batch after the other, each with the caller's n_jobs
+    assert [len(c[0]) for c in calls] == [2, 1] and all(c[1] == 2 for c in calls)
+
+
+def test_pooled_descriptors_are_computed_batch_by_batch(small_dales, monkeypatch):
+    clouds, _ = small_dales
+    pfh = PFHTransformer(n_neighbors=10, pooling="mean")
+    whole = pfh.fit_transform(clouds)
+    batches = []
+    compute = PFHTransformer._transform_batch
+
+    def spy(self, batch, n_jobs):
+        batches.append(len(batch))
+        return compute(self, batch, n_jobs)
+
+    monkeypatch.setattr(PFHTransformer, "_transform_batch", spy)
+    with batch_config(batch_points=5000):  # a few clouds per batch
+        pooled = pfh.transform(clouds)
+    assert len(batches) > 3 and sum(batches) == len(clouds)
+    assert _same(pooled, whole)
+    # per-point rows stay one call: nothing to bound
+    batches.clear()
+    PFHTransformer(n_neighbors=10).fit(clouds).transform(clouds)
+    assert batches == [len(clouds)]
+
+
 def test_threading_backend_batches_in_order():
     clouds = [np.zeros((n, 3)) for n in (5, 6, 7, 1, 1, 9)]
     calls = []
