@@ -70,7 +70,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from bench_descriptors import _cpu_model, _loadavg  # noqa: E402
+from bench_descriptors import _cpu_model, _loadavg, _reset_peak  # noqa: E402
 
 DALES = Path(
     os.environ.get(
@@ -192,19 +192,6 @@ def _status_mb(field):
             if line.startswith(field + ":"):
                 return int(line.split()[1]) / 1024.0
     return float("nan")
-
-
-def _reset_peak():
-    """Reset the peak RSS (VmHWM) to the current RSS; returns it (MB)."""
-    import gc
-
-    gc.collect()
-    try:
-        with open("/proc/self/clear_refs", "w") as f:
-            f.write("5")
-    except OSError:
-        pass
-    return _status_mb("VmRSS")
 
 
 def _worker_reset():

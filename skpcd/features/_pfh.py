@@ -458,9 +458,7 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         self : object
             The transformer.
         """
-        self._check_search()
-        clouds = self._validate(X)
-        self.n_features_in_ = clouds[0].shape[1]
+        self._fit_clouds(X)
         return self
 
     @_fit_context(prefer_skip_nested_validation=True)
@@ -480,10 +478,14 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         descriptors : list of ndarray or ndarray
             As :meth:`transform`.
         """
+        return self._transform(X, self._fit_clouds(X))
+
+    def _fit_clouds(self, X):
+        """What :meth:`fit` checks and sets; returns the validated clouds."""
         self._check_search()
         clouds = self._validate(X)
         self.n_features_in_ = clouds[0].shape[1]
-        return self._transform(X, clouds)
+        return clouds
 
     def _compute(self, clouds, n_jobs):
         """Packed descriptors, the undefined-point mask and the cloud offsets
