@@ -10,6 +10,7 @@ __all__ = [
     "MissingFileError",
     "NonFiniteWarning",
     "PointCloudFileError",
+    "SkippedFilesWarning",
 ]
 
 
@@ -47,6 +48,14 @@ class MissingFileError(PointCloudFileError, FileNotFoundError):
 
 class NonFiniteWarning(UserWarning):
     """Points with NaN or infinite coordinates were dropped while reading."""
+
+
+class SkippedFilesWarning(UserWarning):
+    """Files of a folder that are not point clouds were left out.
+
+    Raised by :func:`skpcd.io.read_segments` with ``errors="skip"``; the
+    message names every file skipped and why.
+    """
 
 
 class IncompatibleModelError(PointCloudFileError):

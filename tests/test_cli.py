@@ -574,11 +574,11 @@ def test_scheduler_gives_the_local_outputs(tmp_path, cluster):
 
 
 def test_scheduler_unreachable_or_missing(tmp_path, monkeypatch):
-    import skpcd.cli
+    import skpcd.cli._common
 
     pytest.importorskip("distributed")
     _labelled_folder(tmp_path / "seg", n_per_class=1)
-    monkeypatch.setattr(skpcd.cli, "_SCHEDULER_TIMEOUT", 1)
+    monkeypatch.setattr(skpcd.cli._common, "SCHEDULER_TIMEOUT", 1)
     args = ["describe", str(tmp_path / "seg"), "-o", str(tmp_path / "d.npz")]
     with pytest.raises(SystemExit, match="cannot reach the Dask scheduler at tcp"):
         main([*args, "--scheduler", "tcp://127.0.0.1:9"])

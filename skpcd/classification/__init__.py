@@ -5,13 +5,21 @@ from skpcd.classification._case_based import (
     case_similarity,
     make_case_based_pipeline,
 )
-from skpcd.classification._default import make_default_pipeline
+from skpcd.classification._confidence import predict_with_confidence
+from skpcd.classification._default import (
+    PIPELINES,
+    make_default_pipeline,
+    make_named_pipeline,
+)
 from skpcd.classification._two_step import TwoStepClassifier
 
 __all__ = [
+    "PIPELINES",
     "CaseBasedClassifier",
     "TwoStepClassifier",
     "case_similarity",
     "make_case_based_pipeline",
     "make_default_pipeline",
+    "make_named_pipeline",
+    "predict_with_confidence",
 ]

@@ -18,7 +18,13 @@ from pathlib import Path
 
 import numpy as np
 
-from skpcd.exceptions import MissingFileError, NonFiniteWarning, PointCloudFileError
+from skpcd.exceptions import (
+    MissingFileError,
+    NonFiniteWarning,
+    PointCloudFileError,
+    SkippedFilesWarning,
+)
+from skpcd.io._atomic import atomic_path
 from skpcd.utils._progress import progress
 
 __all__ = [
@@ -211,7 +217,9 @@ def write_point_cloud(path, points, *, fields=None, encoding=None, overwrite=Fal
         for PLY, PCD and NPY, ascii for text.
     overwrite : bool, default=False
         Replace an existing file. Without it an existing file is never
-        touched and :class:`FileExistsError` is raised.
+        touched and :class:`FileExistsError` is raised. The file is written
+        under a hidden name beside ``path`` and renamed when whole, so an
+        error or an interrupt never leaves a partial file under ``path``.
 
     Raises
     ------
@@ -247,7 +255,8 @@ def write_point_cloud(path, points, *, fields=None, encoding=None, overwrite=Fal
             raise ValueError(f"field {name!r} clashes with the coordinates.")
         out[name] = values
     kwargs = {} if encoding is None else {"encoding": encoding}
-    module.write(path, out, **kwargs)
+    with atomic_path(path, overwrite=overwrite) as tmp:
+        module.write(tmp, out, **kwargs)
 
 
 def _natural_key(name):
@@ -261,8 +270,9 @@ def _list_files(folder_or_glob, labels_path):
             p
             for p in Path(source).iterdir()
             if p.is_file()
+            and not p.name.startswith(".")
             and p.suffix.lower() in _FORMATS
-            and p.name not in ("labels.csv", "segments.csv")
+            and p.name not in ("labels.csv", SEGMENTS_SUMMARY)
         ]
         root = Path(source)
     else:
@@ -312,7 +322,13 @@ def _read_labels(path):
 
 
 def read_segments(
-    folder_or_glob, labels=None, *, fields=None, nonfinite="drop", verbose=False
+    folder_or_glob,
+    labels=None,
+    *,
+    fields=None,
+    nonfinite="drop",
+    verbose=False,
+    errors="raise",
 ):
     """Read a folder of segmented objects, one file per object.
 
@@ -322,8 +338,9 @@ def read_segments(
     ----------
     folder_or_glob : str or path-like
         A folder (every file with a supported extension in it, not
-        recursively, except ``labels.csv`` and ``segments.csv``, the
-        summary written by ``skpcd segment``) or a glob pattern such
+        recursively, except hidden files (names starting with ``.``),
+        ``labels.csv`` and ``segments.csv``, the summary written by
+        ``skpcd segment``) or a glob pattern such
         as ``"scans/**/*.ply"``.
     labels : str or path-like, default=None
         A CSV file of ``file,label`` rows (a ``file,label`` header line is
@@ -338,6 +355,11 @@ def read_segments(
         :func:`read_point_cloud`.
     verbose : bool, default=False
         Show a progress bar on standard error (only on a terminal).
+    errors : {"raise", "skip"}, default="raise"
+        What to do with a file that cannot be read as a point cloud (a
+        stray ``notes.txt``): raise, or leave it out (with its label) and
+        name every skipped file in one
+        :class:`~skpcd.exceptions.SkippedFilesWarning`.
 
     Returns
     -------
@@ -354,9 +376,14 @@ def read_segments(
     MissingFileError
         If the folder, the labels file, or a file it names does not exist.
     PointCloudFileError
-        If no point-cloud file is found, a file is not labelled, or any file
-        cannot be read (see :func:`read_point_cloud`).
+        If no point-cloud file is found, a file is not labelled, any file
+        cannot be read (see :func:`read_point_cloud`) and ``errors`` is
+        ``"raise"``, or a folder written by ``skpcd segment`` does not
+        hold exactly the segments its ``segments.csv`` lists (an interrupted
+        or mixed run).
     """
+    if errors not in ("raise", "skip"):
+        raise ValueError(f"errors must be 'raise' or 'skip', got {errors!r}")
     labels_path, mapping = (None, None) if labels is None else _read_labels(labels)
     files, names = _list_files(folder_or_glob, labels_path)
     if mapping is not None:
@@ -376,10 +403,66 @@ def read_segments(
             raise PointCloudFileError(
                 labels_path, f"{len(unlabelled)} file(s) have no label: {shown}"
             )
+    _check_segment_run(folder_or_glob, names)
     show = None if verbose else False
-    clouds = [
-        read_point_cloud(f, fields=fields, nonfinite=nonfinite)
-        for f in progress(files, desc="reading", enabled=show)
-    ]
-    y = None if mapping is None else np.array([mapping[n] for n in names])
-    return clouds, y, names
+    clouds, kept, skipped = [], [], []
+    for f, name in zip(progress(files, desc="reading", enabled=show), names):
+        try:
+            clouds.append(read_point_cloud(f, fields=fields, nonfinite=nonfinite))
+        except PointCloudFileError as exc:
+            if errors == "raise" or isinstance(exc, MissingFileError):
+                raise
+            skipped.append(f"{name} ({exc.problem})")
+            continue
+        kept.append(name)
+    if skipped:
+        if not kept:
+            raise PointCloudFileError(
+                folder_or_glob, f"no file could be read: {'; '.join(skipped[:5])}"
+            )
+        warnings.warn(
+            f"{folder_or_glob}: skipped {len(skipped)} file(s) that are not point "
+            f"clouds: {'; '.join(skipped[:10])}"
+            + (" ..." if len(skipped) > 10 else ""),
+            SkippedFilesWarning,
+            stacklevel=2,
+        )
+    y = None if mapping is None else np.array([mapping[n] for n in kept])
+    return clouds, y, kept
+
+
+# the file names ``skpcd segment`` writes, and its summary
+_SEGMENT_FILE = re.compile(r"segment_\d{4,}\.[a-z]+")
+SEGMENTS_SUMMARY = "segments.csv"
+
+
+def _check_segment_run(folder, names):
+    """A folder written by ``skpcd segment`` holds one whole run: exactly
+    the segment files its ``segments.csv`` lists, and no segment file
+    without it."""
+    if not os.path.isdir(folder):
+        return
+    summary = Path(folder) / SEGMENTS_SUMMARY
+    written = {n for n in names if _SEGMENT_FILE.fullmatch(n)}
+    if not summary.is_file():
+        if written:
+            raise PointCloudFileError(
+                folder,
+                f"{len(written)} segment_NNNN files but no {SEGMENTS_SUMMARY}: the "
+                "output of an interrupted skpcd segment run? Segment the scene again",
+            )
+        return
+    with open(summary, newline="", encoding="utf-8") as fh:
+        listed = {row["file"] for row in csv.DictReader(fh) if row.get("file")}
+    extra, missing = sorted(written - listed), sorted(listed - set(names))
+    if extra or missing:
+        raise PointCloudFileError(
+            folder,
+            f"does not hold the run its {SEGMENTS_SUMMARY} describes ("
+            + ", ".join(
+                f"{len(v)} {w}: {', '.join(v[:3])}"
+                for v, w in ((extra, "not listed"), (missing, "missing"))
+                if v
+            )
+            + "); segment the scene again into an empty folder",
+        )

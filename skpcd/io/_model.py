@@ -17,6 +17,7 @@ from skpcd.exceptions import (
     MissingFileError,
     PointCloudFileError,
 )
+from skpcd.io._atomic import atomic_path
 
 __all__ = ["load_model", "save_model"]
 
@@ -90,13 +91,8 @@ def save_model(model, path, *, metadata=None, overwrite=False):
     }
     # write beside the target, then rename: a failed dump never leaves a
     # half-written file in place of a good one
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
+    with atomic_path(path, overwrite=overwrite) as tmp:
         joblib.dump(payload, tmp)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return path
 
 

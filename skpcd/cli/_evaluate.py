@@ -1,0 +1,180 @@
+"""``skpcd evaluate [FOLDER]``: cross-validate a pipeline; ``skpcd score
+MODEL FOLDER``: how a saved model does on labelled segments."""
+
+import time
+
+import numpy as np
+
+from skpcd.cli._common import (
+    CommandError,
+    add_n_jobs,
+    add_skip_unreadable,
+    load_labelled,
+    load_model_for,
+    predict_or_explain,
+)
+
+
+def format_report(y_true, y_pred, fold_scores=None):
+    """The text printed by ``skpcd evaluate`` and ``skpcd score``.
+
+    Parameters
+    ----------
+    y_true, y_pred : array-like of shape (n_predictions,)
+        True and predicted labels (of every test fold, pooled).
+    fold_scores : array-like of shape (n_folds,), default=None
+        Accuracy of each test fold; None: one accuracy over all predictions.
+
+    Returns
+    -------
+    report : str
+        Accuracy, a per-class precision/recall table and the confusion
+        matrix (rows: true class, columns: predicted class; a predicted
+        label of no true class, such as ``"unknown"``, gets a column).
+    """
+    from sklearn.metrics import classification_report, confusion_matrix
+
+    y_true, y_pred = np.asarray(y_true), np.asarray(y_pred)
+    classes = np.unique(np.concatenate([y_true, y_pred]).astype(str))
+    y_true, y_pred = y_true.astype(str), y_pred.astype(str)
+    if fold_scores is None:
+        head = f"accuracy  {np.mean(y_true == y_pred):.4f} on {len(y_true)} segments"
+    else:
+        scores = np.asarray(fold_scores)
+        head = (
+            f"accuracy  {scores.mean():.4f} +/- {scores.std():.4f} "
+            f"over {len(scores)} folds"
+        )
+    lines = [
+        head,
+        "",
+        classification_report(
+            y_true, y_pred, labels=classes, digits=3, zero_division=0
+        ),
+        "confusion matrix (rows: true, columns: predicted)",
+    ]
+    cm = confusion_matrix(y_true, y_pred, labels=classes)
+    width = max(6, *(len(str(c)) for c in classes), len(str(cm.max())))
+    lines.append(" " * width + " " + " ".join(f"{c:>{width}}" for c in classes))
+    for c, row in zip(classes, cm):
+        lines.append(f"{c:>{width}} " + " ".join(f"{v:>{width}d}" for v in row))
+    return "\n".join(lines)
+
+
+def add_pipeline_option(parser):
+    from skpcd.classification import PIPELINES
+
+    parser.add_argument(
+        "--pipeline",
+        choices=tuple(PIPELINES),
+        default="default",
+        help="; ".join(f"{k}: {v}" for k, v in PIPELINES.items())
+        + " (default: default)",
+    )
+
+
+def add_parsers(sub):
+    ev = sub.add_parser(
+        "evaluate",
+        help="cross-validate an identification pipeline (the default one unless "
+        "--pipeline)",
+        description="Cross-validate the default pipeline on labelled segments and "
+        "print per-class precision/recall and a confusion matrix. Without FOLDER it "
+        "runs on the embedded synthetic urban objects.",
+    )
+    ev.add_argument("folder", nargs="?", help="folder of per-segment files")
+    add_pipeline_option(ev)
+    ev.add_argument(
+        "--labels", help="CSV of file,label rows (default: FOLDER/labels.csv)"
+    )
+    ev.add_argument("--folds", type=int, default=5, help="number of folds (default 5)")
+    ev.add_argument("--repeats", type=int, default=1, help="CV repetitions (default 1)")
+    ev.add_argument("--random-state", type=int, default=0, help="seed (default 0)")
+    add_n_jobs(ev)
+    add_skip_unreadable(ev)
+    ev.add_argument("--quiet", action="store_true", help="no progress bars")
+    ev.set_defaults(func=run_evaluate)
+
+    sc = sub.add_parser(
+        "score",
+        help="accuracy, per-class precision/recall and confusion matrix of a "
+        "saved model on labelled segments",
+    )
+    sc.add_argument("model", help="a model written by skpcd fit")
+    sc.add_argument("folder", help="folder of per-segment files")
+    sc.add_argument(
+        "--labels", help="CSV of file,label rows (default: FOLDER/labels.csv)"
+    )
+    add_skip_unreadable(sc)
+    sc.add_argument("--quiet", action="store_true", help="no progress bars")
+    sc.set_defaults(func=run_score)
+    return ev, sc
+
+
+def run_evaluate(args):
+    from sklearn.base import clone
+    from sklearn.model_selection import RepeatedStratifiedKFold
+
+    from skpcd.classification import PIPELINES, make_named_pipeline
+    from skpcd.utils._progress import progress
+
+    if args.folds < 2 or args.repeats < 1:
+        raise CommandError(
+            "evaluate",
+            f"--folds must be at least 2 and --repeats at least 1, got {args.folds} "
+            f"and {args.repeats}",
+        )
+    clouds, y, source, _ = load_labelled(args)
+    classes, counts = np.unique(y, return_counts=True)
+    if len(classes) < 2:
+        raise CommandError(
+            "evaluate",
+            f"every segment is labelled {str(classes[0])!r}; cross-validating "
+            "needs at least 2 classes",
+        )
+    if counts.min() < args.folds:
+        raise CommandError(
+            "evaluate",
+            f"class {str(classes[counts.argmin()])!r} has {counts.min()} "
+            f"segment(s), fewer than --folds {args.folds}",
+        )
+    print(f"data      {source}: {len(clouds)} segments, {len(classes)} classes")
+    print(f"pipeline  {args.pipeline}: {PIPELINES[args.pipeline]}")
+    print(
+        f"protocol  {args.folds}-fold stratified CV x {args.repeats}, "
+        f"seed {args.random_state}"
+    )
+    model = make_named_pipeline(
+        args.pipeline, random_state=args.random_state, n_jobs=args.n_jobs
+    )
+    cv = RepeatedStratifiedKFold(
+        n_splits=args.folds, n_repeats=args.repeats, random_state=args.random_state
+    )
+    splits = list(cv.split(np.zeros(len(y)), y))
+    y_true, y_pred, scores = [], [], []
+    start = time.perf_counter()
+    for train, test in progress(
+        splits, desc="folds", enabled=False if args.quiet else None
+    ):
+        fitted = clone(model).fit([clouds[i] for i in train], y[train])
+        pred = fitted.predict([clouds[i] for i in test])
+        y_true.append(y[test])
+        y_pred.append(pred)
+        scores.append(np.mean(pred == y[test]))
+    print(f"time      {time.perf_counter() - start:.1f} s")
+    print()
+    print(format_report(np.concatenate(y_true), np.concatenate(y_pred), scores))
+    return 0
+
+
+def run_score(args):
+    clouds, y, source, _ = load_labelled(args)
+    model = load_model_for(args, "score")
+    start = time.perf_counter()
+    pred, _, _ = predict_or_explain(model, clouds, args, "score")
+    print(f"model     {args.model}")
+    print(f"data      {source}: {len(clouds)} segments")
+    print(f"time      {time.perf_counter() - start:.1f} s")
+    print()
+    print(format_report(y, pred))
+    return 0

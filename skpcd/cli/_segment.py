@@ -1,0 +1,380 @@
+"""``skpcd segment SCENE -o FOLDER`` and ``skpcd identify SCENE --model M -o OUT``."""
+
+import csv
+import re
+import tempfile
+import time
+from contextlib import ExitStack
+from pathlib import Path
+
+import numpy as np
+
+from skpcd.cli._common import (
+    CommandError,
+    add_n_jobs,
+    add_output_options,
+    add_scheduler,
+    check_output,
+    load_model_for,
+    predict_or_explain,
+    side_file,
+    unique_counts,
+)
+
+SEGMENT_FORMATS = ("ply", "pcd", "las", "laz", "xyz", "txt", "csv", "npy")
+
+# points of the segments predicted at a time by identify (memory bound)
+_PREDICT_POINTS = 2_000_000
+
+
+def add_segmentation_options(p):
+    """The options of :func:`skpcd.segmentation.segment_scene`."""
+    p.add_argument(
+        "--ground",
+        choices=("aerial", "mobile", "none"),
+        default="aerial",
+        help="ground removal preset (GroundFilter, SMRF), or none (default aerial)",
+    )
+    p.add_argument(
+        "--method",
+        choices=("dbscan", "euclidean"),
+        default="dbscan",
+        help="dbscan: AutoEpsDBSCAN, eps from the data unless --eps; euclidean: "
+        "EuclideanClusters, eps 0.2 unless --eps (default dbscan)",
+    )
+    p.add_argument("--eps", type=float, default=None, help="clustering radius (m)")
+    p.add_argument(
+        "--eps-scale",
+        type=float,
+        default=2.5,
+        help="dbscan without --eps: the radius is this multiple of the knee "
+        "distance of the k-distance curve (default 2.5)",
+    )
+    p.add_argument(
+        "--min-samples", type=int, default=5, help="DBSCAN core count (default 5)"
+    )
+    p.add_argument(
+        "--min-size", type=int, default=50, help="smallest segment kept (default 50)"
+    )
+    p.add_argument("--max-size", type=int, default=None, help="largest segment kept")
+    p.add_argument("--random-state", type=int, default=0, help="seed (default 0)")
+    p.add_argument(
+        "--keep-fields",
+        action="store_true",
+        help="copy the scene's extra fields (intensity...) into the outputs",
+    )
+    p.add_argument(
+        "--tile-size",
+        type=float,
+        default=None,
+        help="process the scene in square tiles of this side (metres), streaming "
+        "LAS/LAZ input, so that memory is bounded by the tile, not the scene; "
+        "same segments as without",
+    )
+    p.add_argument(
+        "--tile-buffer",
+        type=float,
+        default=None,
+        help="overlap around each tile (m); default: the smallest that keeps "
+        "the result exact (see segment_scene)",
+    )
+    add_n_jobs(p)
+    add_output_options(p)
+    add_scheduler(p)
+
+
+def add_parsers(sub):
+    seg = sub.add_parser(
+        "segment",
+        help="cut a scene into segments, one file each",
+        description="Remove the ground (SMRF), cluster the rest (DBSCAN with "
+        "automatic eps, or Euclidean clusters), keep segments within the size "
+        "range and write one file per segment plus segments.csv (points and "
+        "extents of each) into the output folder. The folder is filled under a "
+        "temporary name and swapped in when whole; --overwrite replaces an "
+        "earlier run's folder, never files skpcd did not write.",
+    )
+    seg.add_argument("scene", help="a point-cloud file (.ply .pcd .las .laz .xyz ...)")
+    seg.add_argument("-o", "--output", required=True, help="output folder")
+    seg.add_argument(
+        "--format",
+        default="ply",
+        choices=SEGMENT_FORMATS,
+        help="format of the segment files (default ply)",
+    )
+    add_segmentation_options(seg)
+    seg.set_defaults(func=run_segment)
+
+    ident = sub.add_parser(
+        "identify",
+        help="segment a scene and label each segment with a saved model",
+        description="Segment a scene as 'skpcd segment' does, predict the class "
+        "of each segment with a model written by 'skpcd fit', and write the "
+        "scene with per-point fields segment (-1: none), class, ground and the "
+        "probability or similarity of the answer. A LAS/LAZ scene written as "
+        "LAS/LAZ keeps every point and dimension; ground points get "
+        "classification 2, class is 64 + the class index (0: none) and the "
+        "class names are stored in the file; in other formats class is the "
+        "index (-1: none). Class names also go to OUTPUT.classes.csv.",
+    )
+    ident.add_argument("scene", help="a point-cloud file")
+    ident.add_argument("--model", required=True, help="a model written by skpcd fit")
+    ident.add_argument(
+        "-o", "--output", required=True, help="labelled scene (.las .laz .ply .pcd...)"
+    )
+    add_segmentation_options(ident)
+    ident.set_defaults(func=run_identify)
+    return seg, ident
+
+
+def segment_file(args, command, fields=None):
+    """Read SCENE and segment it; returns ``(points, extras, result)``.
+
+    With ``--tile-size`` the scene is not read here (segment_scene streams
+    it tile by tile): ``points`` is None and ``extras`` empty. Otherwise
+    ``result`` covers every point of the file (non-finite ones: no segment,
+    not ground), in file order."""
+    from skpcd.io import read_point_cloud
+    from skpcd.segmentation import segment_scene
+
+    tiled = args.tile_size is not None
+    finite = None
+    if tiled:
+        points, extras, source = None, {}, args.scene
+    else:
+        read = read_point_cloud(args.scene, fields=fields, nonfinite="keep")
+        points, extras = read if fields else (read, {})
+        finite = np.isfinite(points).all(axis=1)
+        source = points if finite.all() else points[finite]
+    tiling = (
+        {"tile_size": args.tile_size, "tile_buffer": args.tile_buffer} if tiled else {}
+    )
+    start = time.perf_counter()
+    try:
+        result = segment_scene(
+            source,
+            ground=None if args.ground == "none" else args.ground,
+            method=args.method,
+            eps=args.eps,
+            eps_scale=args.eps_scale,
+            min_samples=args.min_samples,
+            min_cluster_size=args.min_size,
+            max_cluster_size=args.max_size,
+            random_state=args.random_state,
+            n_jobs=args.n_jobs,
+            **tiling,
+        )
+    except ValueError as exc:
+        raise CommandError(command, str(exc)) from exc
+    if finite is not None and not finite.all():
+        labels = np.full(len(points), -1, dtype=result.labels.dtype)
+        ground = np.zeros(len(points), dtype=bool)
+        labels[finite], ground[finite] = result.labels, result.ground
+        result = result._replace(labels=labels, ground=ground)
+    if not args.quiet:
+        labels = result.labels
+        print(
+            f"scene     {args.scene}: {len(labels)} points, "
+            f"{int(result.ground.sum())} ground"
+        )
+        print(
+            f"segments  {result.n_segments} ({args.method}, eps {result.eps:.3f}); "
+            f"{int(((labels < 0) & ~result.ground).sum())} points in none "
+            f"({time.perf_counter() - start:.1f} s)"
+        )
+    return points, extras, result
+
+
+def _segments(args, points, extras, result, folder):
+    """``(points, fields)`` of each segment, in order."""
+    from skpcd.segmentation._members import iter_segment_points, segment_members
+
+    if points is None:  # tiled: gathered in one pass over the scene
+        return iter_segment_points(
+            args.scene,
+            result.labels,
+            result.n_segments,
+            fields=args.keep_fields,
+            folder=folder,
+        )
+    return (
+        (points[idx], {name: values[idx] for name, values in extras.items()})
+        for idx in segment_members(result.labels, result.n_segments)
+    )
+
+
+def _written_by_segment(name):
+    """The entries ``skpcd segment`` writes in its folder."""
+    from skpcd.io._api import SEGMENTS_SUMMARY
+
+    return name == SEGMENTS_SUMMARY or bool(
+        re.fullmatch(rf"segment_\d{{4,}}\.({'|'.join(SEGMENT_FORMATS)})", name)
+    )
+
+
+def run_segment(args):
+    from skpcd.io import write_point_cloud
+    from skpcd.io._api import SEGMENTS_SUMMARY
+    from skpcd.io._atomic import atomic_folder, check_folder_output
+
+    from skpcd.exceptions import MissingFileError
+
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise CommandError("segment", f"{out} exists and is not a folder")
+    if not Path(args.scene).exists():
+        raise MissingFileError(args.scene, "no such file")
+    if Path(args.scene).resolve().is_relative_to(out.resolve()):
+        raise CommandError(
+            "segment", f"the scene {args.scene} is inside the output folder {out}"
+        )
+    if out.is_dir() and any(out.iterdir()) and not args.overwrite:
+        raise CommandError(
+            "segment",
+            f"{out} is not empty; pass --overwrite to replace an earlier run's "
+            "segments (files skpcd did not write are never deleted)",
+        )
+    check_folder_output(out, overwrite=True, owned=_written_by_segment)
+    points, extras, result = segment_file(
+        args, "segment", "all" if args.keep_fields else None
+    )
+    n = result.n_segments
+    width = max(4, len(str(n - 1)))
+    rows = []
+    with atomic_folder(out, overwrite=args.overwrite, owned=_written_by_segment) as tmp:
+        for i, (seg, fields) in enumerate(_segments(args, points, extras, result, tmp)):
+            name = f"segment_{i:0{width}d}.{args.format}"
+            try:
+                write_point_cloud(tmp / name, seg, fields=fields or None)
+            except ValueError as exc:  # a field the format cannot hold
+                raise CommandError("segment", str(exc)) from exc
+            lo, hi = seg.min(axis=0), seg.max(axis=0)
+            rows.append([name, i, len(seg), *lo, *hi, *(hi - lo)])
+        with open(tmp / SEGMENTS_SUMMARY, "w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(
+                ["file", "segment", "n_points"]
+                + [f"{a}_{c}" for a in ("min", "max", "extent") for c in "xyz"]
+            )
+            for row in rows:
+                writer.writerow(row[:3] + [f"{v:.4f}" for v in row[3:]])
+    if not args.quiet:
+        print(f"written   {n} {args.format} files and {SEGMENTS_SUMMARY} -> {out}")
+    return 0
+
+
+def _classify_segments(model, segments, args):
+    """Answer, its kind, confidence and size of each segment, predicted in
+    batches of about ``_PREDICT_POINTS`` points (the answers do not depend
+    on the batches)."""
+    preds, scores, sizes, kind, batch, size = [], [], [], None, [], 0
+
+    def flush():
+        nonlocal kind
+        pred, kind, score = predict_or_explain(model, batch, args, "identify")
+        preds.append(np.asarray(pred))
+        scores.append(np.full(len(batch), np.nan) if score is None else score)
+        batch.clear()
+
+    for seg, _ in segments:
+        batch.append(seg)
+        sizes.append(len(seg))
+        size += len(seg)
+        if size >= _PREDICT_POINTS:
+            flush()
+            size = 0
+    if batch:
+        flush()
+    if not preds:
+        return np.array([], dtype=object), None, np.array([]), np.array([], int)
+    return np.concatenate(preds), kind, np.concatenate(scores), np.array(sizes)
+
+
+def _per_point(labels, values, fill, dtype, out, chunk=1_000_000):
+    """``values[labels]`` (``fill`` where labels < 0) into ``out``, chunk by
+    chunk (``labels`` and ``out`` may be memmaps)."""
+    for start in range(0, len(labels), chunk):
+        lab = np.asarray(labels[start : start + chunk])
+        part = np.full(len(lab), fill, dtype=dtype)
+        inside = lab >= 0
+        part[inside] = values[lab[inside]]
+        out[start : start + len(lab)] = part
+    return out
+
+
+def run_identify(args):
+    from skpcd.io import write_labelled_scan
+    from skpcd.io._atomic import PARTIAL_MARK, atomic_path
+
+    inputs = [args.scene, args.model]
+    out = check_output(args.output, args, "identify", inputs=inputs)
+    legend = check_output(
+        side_file(out, "classes.csv"), args, "identify", inputs=inputs
+    )
+    model = load_model_for(args, "identify")
+    points, _, result = segment_file(args, "identify")
+    n_points = len(result.labels)
+    with ExitStack() as stack:
+        work = Path(
+            stack.enter_context(
+                tempfile.TemporaryDirectory(prefix=PARTIAL_MARK, dir=out.parent)
+            )
+        )
+        pred, kind, seg_score, seg_sizes = _classify_segments(
+            model, _segments(args, points, {}, result, work), args
+        )
+        classes = list(getattr(model, "classes_", []))
+        classes += sorted({str(p) for p in pred} - {str(c) for c in classes})
+        index = {str(c): j for j, c in enumerate(classes)}
+        seg_class = np.array([index[str(p)] for p in pred], dtype=np.int32)
+
+        def per_point(name, values, fill, dtype):
+            target = (
+                np.empty(n_points, dtype=dtype)
+                if points is not None
+                else np.lib.format.open_memmap(
+                    work / f"{name}.npy", "w+", dtype=dtype, shape=(n_points,)
+                )
+            )
+            return _per_point(result.labels, values, fill, dtype, target)
+
+        point_class = per_point("class", seg_class, -1, np.int32)
+        point_score = (
+            per_point("score", seg_score.astype(np.float32), np.nan, np.float32)
+            if kind
+            else None
+        )
+        out_tmp = stack.enter_context(atomic_path(out, overwrite=args.overwrite))
+        legend_tmp = stack.enter_context(atomic_path(legend, overwrite=args.overwrite))
+        try:
+            write_labelled_scan(
+                args.scene,
+                out_tmp,
+                segment=result.labels,
+                class_index=point_class,
+                class_names=[str(c) for c in classes],
+                score=point_score,
+                score_name=kind,
+                ground=result.ground,
+                keep_fields=args.keep_fields,
+            )
+        except ValueError as exc:  # a field the format cannot hold, ...
+            raise CommandError("identify", str(exc)) from exc
+        with open(legend_tmp, "w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(["class", "las_code", "name", "n_segments", "n_points"])
+            outside = n_points - int(seg_sizes.sum())
+            writer.writerow([-1, 0, "(no segment)", 0, outside])
+            for j, c in enumerate(classes):
+                mine = seg_class == j
+                writer.writerow(
+                    [j, 64 + j, c, int(mine.sum()), int(seg_sizes[mine].sum())]
+                )
+    if not args.quiet:
+        print(f"classes   {unique_counts(pred) or 'none'}")
+        print(
+            f"written   {out} (fields segment, class, ground"
+            + (f", {kind}" if kind else "")
+            + f"); class names in {legend.name}"
+        )
+    return 0
