@@ -254,7 +254,7 @@ def test_identify_writes_the_labelled_scene(tmp_path, capsys):
     segment, cls = f["segment"].astype(int), f["class"].astype(int)
     assert ((segment < 0) == (cls < 0)).all()
     assert f["ground"][truth == -1].mean() > 0.99
-    legend = list(csv.DictReader((tmp_path / "labelled_classes.csv").open()))
+    legend = list(csv.DictReader((tmp_path / "labelled.ply.classes.csv").open()))
     names = {int(r["class"]): r["name"] for r in legend}
     assert names[-1] == "(no segment)"
     assert sorted(v for k, v in names.items() if k >= 0) == sorted(set(labels))

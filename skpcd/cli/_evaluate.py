@@ -9,6 +9,7 @@ from skpcd.cli._common import (
     CommandError,
     add_n_jobs,
     add_skip_unreadable,
+    labels_path,
     load_labelled,
     load_model_for,
     predict_or_explain,
@@ -168,6 +169,7 @@ def run_evaluate(args):
 
 
 def run_score(args):
+    labels_path(args)  # the folder and its labels exist
     clouds, y, source, _ = load_labelled(args)
     model = load_model_for(args, "score")
     start = time.perf_counter()

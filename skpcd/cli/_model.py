@@ -11,6 +11,7 @@ from skpcd.cli._common import (
     add_output_options,
     add_scheduler,
     add_skip_unreadable,
+    check_folder,
     check_not_an_input,
     check_output,
     labels_path,
@@ -99,6 +100,7 @@ def run_predict(args):
     from skpcd.io._atomic import atomic_path
 
     out = check_output(args.output, args, "predict", inputs=[args.model])
+    check_folder(args.folder, "predict")
     model = load_model_for(args, "predict")
     clouds, _, names, files = read_folder(args)
     check_not_an_input(out, "predict", files)

@@ -213,11 +213,10 @@ def _written_by_segment(name):
 
 
 def run_segment(args):
+    from skpcd.exceptions import MissingFileError
     from skpcd.io import write_point_cloud
     from skpcd.io._api import SEGMENTS_SUMMARY
     from skpcd.io._atomic import atomic_folder, check_folder_output
-
-    from skpcd.exceptions import MissingFileError
 
     out = Path(args.output)
     if out.exists() and not out.is_dir():
