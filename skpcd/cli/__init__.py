@@ -55,7 +55,7 @@ def main(argv=None):
         0 on success; 1 when an input file cannot be used or an output
         cannot be written; 130 on Ctrl-C and 143 on SIGTERM (no partial
         output is left). A command that cannot run as asked raises
-        :class:`SystemExit` with a one-line message (status 2 from the
+        :class:`SystemExit` with a one-line message (status 1 from the
         shell).
     """
     args = build_parser().parse_args(argv)

@@ -16,7 +16,7 @@ SCHEDULER_TIMEOUT = 10
 
 
 class CommandError(SystemExit):
-    """A command cannot run as asked: one line on stderr, status 2."""
+    """A command cannot run as asked: one line on stderr, status 1."""
 
     def __init__(self, command, message):
         super().__init__(f"skpcd {command}: {message}")
