@@ -6,6 +6,7 @@ from skpcd.io._api import (
     read_segments,
     write_point_cloud,
 )
+from skpcd.io._labelled import read_class_names, write_labelled_scan
 from skpcd.io._las import LasExtent, iter_points, read_las_extent
 from skpcd.io._model import load_model, save_model
 
@@ -14,9 +15,11 @@ __all__ = [
     "LasExtent",
     "iter_points",
     "load_model",
+    "read_class_names",
     "read_las_extent",
     "read_point_cloud",
     "read_segments",
     "save_model",
+    "write_labelled_scan",
     "write_point_cloud",
 ]

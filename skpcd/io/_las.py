@@ -24,7 +24,9 @@ other field becomes extra bytes (``(n, c)`` fields as ``name_0 ...
 name_{c-1}``).
 """
 
+import contextlib
 import os
+import struct
 import typing
 from numbers import Integral
 from pathlib import Path
@@ -75,6 +77,86 @@ def _open(laspy, path):
         raise PointCloudFileError(
             path, f"cannot read as LAS/LAZ: {_problem(exc)}"
         ) from exc
+
+
+@contextlib.contextmanager
+def open_checked(laspy, path):
+    """Open ``path`` with laspy; yields ``(reader, n_points)``."""
+    with _open(laspy, path) as reader:
+        yield reader, int(reader.header.point_count)
+
+
+def checked_chunks(reader, path, chunk_size, n_points):
+    """The point records of ``reader``, ``chunk_size`` at a time, laspy's
+    errors turned into PointCloudFileError, and fewer points than the header
+    declares an error too."""
+    chunks = reader.chunk_iterator(chunk_size)
+    n_read = 0
+    while True:
+        try:
+            chunk = next(chunks)
+        except StopIteration:
+            break
+        except Exception as exc:
+            raise PointCloudFileError(
+                path, f"cannot read as LAS/LAZ: {_problem(exc)}"
+            ) from exc
+        if len(chunk) == 0:
+            break
+        n_read += len(chunk)
+        yield chunk
+    if n_read < n_points:
+        raise PointCloudFileError(
+            path,
+            f"cannot read as LAS/LAZ: truncated: the header declares {n_points} "
+            f"points, the file holds {n_read}",
+        )
+
+
+def read_vlr_records(path):
+    """Every VLR and EVLR of a LAS/LAZ file as ``(user_id, record_id, data)``,
+    read from the bytes (not through laspy, which rewrites known records)."""
+    path = _check_file(path)
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        head = f.read(375)
+        if len(head) < 227 or head[:4] != b"LASF":
+            raise PointCloudFileError(path, "cannot read as LAS/LAZ: not a LAS file")
+        minor = head[25]
+        (header_size,) = struct.unpack_from("<H", head, 94)
+        offset, n_vlrs = struct.unpack_from("<II", head, 96)
+        records = []
+        pos = header_size
+        for _ in range(n_vlrs):
+            if pos + 54 > min(offset, size):
+                break
+            f.seek(pos)
+            raw = f.read(54)
+            (length,) = struct.unpack_from("<H", raw, 20)
+            if pos + 54 + length > size:
+                break
+            records.append((_text(raw[2:18]), raw[18] | raw[19] << 8, f.read(length)))
+            pos += 54 + length
+        if minor >= 4 and len(head) >= 247:
+            start, n_evlrs = struct.unpack_from("<QI", head, 235)
+            pos = start
+            for _ in range(n_evlrs if start else 0):
+                if pos + 60 > size:
+                    break
+                f.seek(pos)
+                raw = f.read(60)
+                (length,) = struct.unpack_from("<Q", raw, 20)
+                if pos + 60 + length > size:
+                    break
+                records.append(
+                    (_text(raw[2:18]), raw[18] | raw[19] << 8, f.read(length))
+                )
+                pos += 60 + length
+    return records
+
+
+def _text(raw):
+    return raw.split(b"\0")[0].decode("ascii", "replace")
 
 
 class LasExtent(typing.NamedTuple):
@@ -398,7 +480,7 @@ def _plan(laspy, fields):
     return point_format, standard, extra
 
 
-def write(path, fields, *, encoding=None):
+def write(path, fields, *, encoding=None, extra_params=None, vlrs=()):
     """Write ``fields`` as a LAS or LAZ file; see the module docstring.
 
     The extension picks the compression: ``.laz`` is compressed with lazrs.
@@ -411,6 +493,12 @@ def write(path, fields, *, encoding=None):
         ``x``, ``y``, ``z`` then extra fields of shape ``(n,)`` or ``(n, c)``.
     encoding : None or "binary", default=None
         LAS is always binary.
+    extra_params : dict of str to laspy.ExtraBytesParams, default=None
+        The definition (type, description, no-data value) of some extra
+        dimensions, in place of the default one (the field's type, no
+        description).
+    vlrs : sequence of laspy.VLR, default=()
+        VLRs to add to the header.
 
     Raises
     ------
@@ -431,10 +519,16 @@ def write(path, fields, *, encoding=None):
     point_format, standard, extra = _plan(laspy, fields)
     try:
         header = laspy.LasHeader(point_format=point_format, version="1.4")
+        given = extra_params or {}
         if extra:
             header.add_extra_dims(
-                [laspy.ExtraBytesParams(name, v.dtype) for name, v in extra.items()]
+                [
+                    given.get(name) or laspy.ExtraBytesParams(name, v.dtype)
+                    for name, v in extra.items()
+                ]
             )
+        if vlrs:
+            header.vlrs = [*header.vlrs, *vlrs]
         scales_offsets = [_scale_offset(v) for v in coords]
         header.scales = np.array([s for s, _ in scales_offsets])
         header.offsets = np.array([o for _, o in scales_offsets])
