@@ -61,7 +61,8 @@ def add_segmentation_options(p):
     p.add_argument(
         "--keep-fields",
         action="store_true",
-        help="copy the scene's extra fields (intensity...) into the outputs",
+        help="copy the scene's extra fields (intensity...) into the outputs "
+        "(identify from LAS/LAZ to LAS/LAZ always keeps every dimension)",
     )
     p.add_argument(
         "--tile-size",
@@ -301,6 +302,10 @@ def _per_point(labels, values, fill, dtype, out, chunk=1_000_000):
     return out
 
 
+def _is_las(path):
+    return Path(path).suffix.lower() in (".las", ".laz")
+
+
 def run_identify(args):
     from skpcd.io import write_labelled_scan
     from skpcd.io._atomic import PARTIAL_MARK, atomic_path
@@ -355,7 +360,8 @@ def run_identify(args):
                 score=point_score,
                 score_name=kind,
                 ground=result.ground,
-                keep_fields=args.keep_fields,
+                # a LAS/LAZ copy always keeps every dimension of the scan
+                keep_fields=args.keep_fields or (_is_las(args.scene) and _is_las(out)),
             )
         except ValueError as exc:  # a field the format cannot hold, ...
             raise CommandError("identify", str(exc)) from exc
