@@ -121,8 +121,8 @@ def test_identify_side_file_is_named_after_the_whole_output(tmp_path, models):
         assert (tmp_path / f"{name}.classes.csv").is_file()
     with pytest.raises(SystemExit, match="exists; pass --overwrite"):
         _identify(scene, models["default"], tmp_path / "labelled.ply")
-    again = _identify(scene, models["default"], tmp_path / "labelled.ply", "--overwrite")
-    assert again == 0
+    out = tmp_path / "labelled.ply"
+    assert _identify(scene, models["default"], out, "--overwrite") == 0
     with pytest.raises(SystemExit, match="is an input file"):
         _identify(scene, models["default"], scene, "--overwrite")
 
