@@ -13,6 +13,7 @@ import glob
 import importlib
 import os
 import re
+import stat
 import warnings
 from pathlib import Path
 
@@ -63,6 +64,32 @@ def _format_module(path):
             + ", ".join(SUPPORTED_EXTENSIONS),
         )
     return importlib.import_module(f"skpcd.io.{_FORMATS[suffix]}")
+
+
+def check_regular_file(path):
+    """Raise a clear error unless ``path`` is a regular file (or a link to
+    one): missing, a folder, a symbolic-link loop, a FIFO, a socket or a
+    device each get their own message, and none is opened."""
+    path = Path(os.fspath(path))
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        kind = "a broken symbolic link" if path.is_symlink() else "no such file"
+        raise MissingFileError(path, kind) from None
+    except OSError as exc:  # ELOOP, EACCES, ENAMETOOLONG...
+        raise PointCloudFileError(path, f"cannot be read: {exc.strerror}") from None
+    if stat.S_ISREG(mode):
+        return path
+    if stat.S_ISDIR(mode):
+        raise MissingFileError(path, "is a directory, not a file")
+    kind = (
+        "a FIFO (named pipe)"
+        if stat.S_ISFIFO(mode)
+        else "a socket"
+        if stat.S_ISSOCK(mode)
+        else "a device"
+    )
+    raise PointCloudFileError(path, f"is {kind}, not a regular file")
 
 
 def _pick(fields, name, path):
@@ -148,9 +175,7 @@ def read_point_cloud(path, *, fields=None, nonfinite="drop"):
         )
     path = Path(os.fspath(path))
     module = _format_module(path)
-    if not path.is_file():
-        what = "is a directory, not a file" if path.is_dir() else "no such file"
-        raise MissingFileError(path, what)
+    check_regular_file(path)
     if path.stat().st_size == 0:
         raise PointCloudFileError(path, "the file is empty (0 bytes).")
     data, _ = module.read(path)
@@ -299,9 +324,7 @@ def _list_files(folder_or_glob, labels_path):
 
 
 def _read_labels(path):
-    path = Path(os.fspath(path))
-    if not path.is_file():
-        raise MissingFileError(path, "labels file not found")
+    path = check_regular_file(path)
     with open(path, newline="", encoding="utf-8") as fh:
         rows = [row for row in csv.reader(fh) if row and any(c.strip() for c in row)]
     if not rows:

@@ -16,11 +16,12 @@ list properties are refused. Consecutive vertex properties named
 field ``name`` (the way :func:`write` stores such fields); ``info["grouped"]``
 lists them.
 
-The body must hold what the header declares: missing vertex data is an error,
-and so, when every element has a fixed size (no list property after the
-vertices), is any byte or ascii line left after the last element. When a
-list-bearing element follows the vertices it is not parsed, so the end of the
-file is not checked.
+The body must hold exactly what the header declares: missing data is an
+error, and so is any byte or ascii line left after the last element. List
+properties (faces) are walked by a compiled loop, so a wrong vertex count is
+found even when faces follow the vertices. The file is mapped, not read
+whole, and its first bytes must be ``ply``: a large file that is not a PLY
+file is refused before anything is read.
 
 Writing stores x, y, z as ``float`` when float32 holds them exactly, else
 ``double``; ``normals`` as ``nx ny nz``, ``colors`` as ``red green blue``,
@@ -29,8 +30,10 @@ integer type (64-bit integers need values within 32 bits: PLY has no 64-bit
 type); booleans become ``uchar``.
 """
 
+import mmap
 import re
 
+import numba
 import numpy as np
 
 from skpcd.exceptions import PointCloudFileError
@@ -203,53 +206,73 @@ def _vertex(path, elements):
     return vertex
 
 
+@numba.njit(cache=True)
+def _walk_lists(data, pos, count, heads, items, signed, big):
+    """Offset after ``count`` instances of an element with list properties
+    (property ``j``: a count of ``heads[j]`` bytes then ``items[j]``-byte
+    items; ``heads[j] == 0`` for a scalar of ``items[j]`` bytes); -1 - i
+    when instance ``i`` runs past the end, -1 - count - i when its list
+    length is negative."""
+    end = len(data)
+    for i in range(count):
+        for j in range(len(heads)):
+            head = heads[j]
+            if head == 0:
+                pos += items[j]
+                continue
+            if pos + head > end:
+                return -1 - i
+            k = 0
+            for b in range(head):
+                byte = data[pos + (b if big else head - 1 - b)]
+                k = (k << 8) | byte
+            if signed[j] and k >= 1 << (8 * head - 1):
+                return -1 - count - i
+            pos += head + k * items[j]
+        if pos > end:
+            return -1 - i
+    return pos
+
+
 def _skip_lists(path, data, pos, element, order):
     """Offset after ``element``, whose instances hold list properties."""
-    end = len(data)
-    steps = []
+    heads, items, signed = [], [], []
     for _, code, count_code in element.properties:
-        size = np.dtype(code).itemsize
         if count_code is None:
-            steps.append((size, 0, None))
+            heads.append(0)
+            items.append(np.dtype(code).itemsize)
+            signed.append(False)
         else:
-            steps.append(
-                (np.dtype(count_code).itemsize, size, np.dtype(order + count_code))
-            )
-    big = order == ">"
-    for i in range(element.count):
-        for head, item, count_dtype in steps:
-            if pos + head > end:
-                raise _fail(
-                    path,
-                    f"truncated data: {element.name} {i} of {element.count} runs past "
-                    "the end of the file.",
-                )
-            if count_dtype is not None:
-                k = int.from_bytes(
-                    data[pos : pos + head],
-                    "big" if big else "little",
-                    signed=count_dtype.kind == "i",
-                )
-                if k < 0:
-                    raise _fail(
-                        path,
-                        f"corrupt data: {element.name} {i} has a negative list length.",
-                    )
-                pos += k * item
-            pos += head
-    if pos > end:
+            heads.append(np.dtype(count_code).itemsize)
+            items.append(np.dtype(code).itemsize)
+            signed.append(np.dtype(count_code).kind == "i")
+    end = _walk_lists(
+        np.frombuffer(data, dtype=np.uint8),
+        pos,
+        element.count,
+        np.array(heads, dtype=np.int64),
+        np.array(items, dtype=np.int64),
+        np.array(signed, dtype=np.bool_),
+        order == ">",
+    )
+    if end < -element.count:
         raise _fail(
             path,
-            f"truncated data: {element.name} {element.count - 1} runs past the end "
-            "of the file.",
+            f"corrupt data: {element.name} {-1 - element.count - end} has a "
+            "negative list length.",
         )
-    return pos
+    if end < 0:
+        raise _fail(
+            path,
+            f"truncated data: {element.name} {-1 - end} of {element.count} runs "
+            "past the end of the file.",
+        )
+    return end
 
 
 def _read_binary(path, data, start, elements, vertex, order):
     pos = start
     records = None
-    check_end = True
     for element in elements:
         if element is vertex:
             dtype = element.dtype(order)
@@ -262,11 +285,6 @@ def _read_binary(path, data, start, elements, vertex, order):
                 )
             records = np.frombuffer(data, dtype=dtype, count=element.count, offset=pos)
             pos += need
-        elif records is not None and not element.fixed:
-            check_end = (
-                False  # list data after the vertices: neither parsed nor checked
-            )
-            break
         elif element.fixed:
             need = element.count * element.dtype(order).itemsize
             if len(data) - pos < need:
@@ -278,7 +296,7 @@ def _read_binary(path, data, start, elements, vertex, order):
             pos += need
         else:
             pos = _skip_lists(path, data, pos, element, order)
-    if check_end and pos != len(data):
+    if pos != len(data):
         raise _fail(
             path,
             f"{len(data) - pos} bytes of data after the last element (the header "
@@ -393,7 +411,12 @@ def read(path):
         list, or the body is shorter or longer than the header declares.
     """
     with open(path, "rb") as fh:
-        data = fh.read()
+        magic = fh.read(4)
+        if magic not in (b"ply\n", b"ply\r"):
+            raise _fail(path, f"not a PLY file: it starts with {magic!r}, not 'ply'.")
+        # mapped, not read: closed when the last view goes (an error's
+        # traceback may hold views of it)
+        data = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
     fmt, version, elements, comments, start = _parse_header(path, data)
     vertex = _vertex(path, elements)
     if fmt == "ascii":

@@ -125,3 +125,29 @@ def test_npy_bad_shapes(tmp_path):
     (tmp_path / "junk.npy").write_bytes(b"not numpy at all")
     with pytest.raises(PointCloudFileError, match=r"not a readable \.npy"):
         read_point_cloud(tmp_path / "junk.npy")
+
+
+@pytest.mark.parametrize("kind", ["fifo", "loop", "broken", "folder"])
+def test_files_that_are_not_regular_files_are_named_as_such(tmp_path, kind):
+    # before: a FIFO and a symbolic-link loop were reported as "no such file"
+    import os
+
+    path = tmp_path / "cloud.xyz"
+    expected = {
+        "fifo": "is a FIFO \\(named pipe\\), not a regular file",
+        "loop": "cannot be read: Too many levels of symbolic links",
+        "broken": "a broken symbolic link",
+        "folder": "is a directory, not a file",
+    }[kind]
+    if kind == "fifo":
+        os.mkfifo(path)
+    elif kind == "loop":
+        path.symlink_to(tmp_path / "other.xyz")
+        (tmp_path / "other.xyz").symlink_to(path)
+    elif kind == "broken":
+        path.symlink_to(tmp_path / "gone.xyz")
+    else:
+        path.mkdir()
+    with pytest.raises(PointCloudFileError, match=f"{path}: {expected}") as info:
+        read_point_cloud(path)  # never opened: a FIFO would block here
+    assert isinstance(info.value, MissingFileError) == (kind in ("broken", "folder"))

@@ -297,10 +297,46 @@ def test_other_elements_are_skipped(tmp_path, fmt, vertex_first, edges):
 
 
 @pytest.mark.parametrize("fmt", ["binary_little_endian", "binary_big_endian"])
-def test_list_element_after_vertices_is_not_checked(tmp_path, fmt):
-    # the faces after the vertices are neither parsed nor checked
-    path = _mesh(tmp_path / "m.ply", fmt, vertex_first=True, tail=b"trailing bytes")
+def test_list_element_after_vertices_is_checked(tmp_path, fmt):
+    # before: the faces after the vertices were neither parsed nor checked,
+    # so trailing bytes and a wrong vertex count went unnoticed
+    path = _mesh(tmp_path / "m.ply", fmt, vertex_first=True)
     np.testing.assert_array_equal(read_point_cloud(path), MESH_VERTICES)
+    path = _mesh(tmp_path / "m.ply", fmt, vertex_first=True, tail=b"trailing bytes")
+    with _raises(path, "14 bytes of data after the last element"):
+        read_point_cloud(path)
+    path = _mesh(tmp_path / "m.ply", fmt, vertex_first=True)
+    data = path.read_bytes()
+    n = len(MESH_VERTICES)
+    path.write_bytes(
+        data.replace(b"element vertex %d" % n, b"element vertex %d" % (n - 1))
+    )
+    with pytest.raises(PointCloudFileError, match=str(path)):
+        read_point_cloud(path)
+
+
+def test_a_large_file_that_is_not_ply_is_refused_before_reading(tmp_path):
+    # before: a 3 GB zero-filled .ply was read whole (3 GB of memory) before
+    # its first bytes were checked; a sparse 4 GB file costs no disk here
+    import subprocess
+    import sys
+
+    path = tmp_path / "zeros.ply"
+    with open(path, "wb") as f:
+        f.truncate(4 << 30)
+    script = (
+        "import resource, sys\n"
+        "resource.setrlimit(resource.RLIMIT_AS, (1 << 30, 1 << 30))\n"
+        "from skpcd.io import read_point_cloud\n"
+        "from skpcd.exceptions import PointCloudFileError\n"
+        f"try:\n    read_point_cloud({str(path)!r})\n"
+        "except PointCloudFileError as exc:\n    print(exc)\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "not a PLY file" in proc.stdout and str(path) in proc.stdout
 
 
 @pytest.mark.parametrize("fmt", ["binary_little_endian", "binary_big_endian"])
