@@ -29,6 +29,7 @@ fields keep their type (booleans become ``U 1``); ``normals`` is written as
 c``. The cloud is written unorganized (``HEIGHT 1``).
 """
 
+import mmap
 import re
 
 import numpy as np
@@ -51,12 +52,35 @@ _KEYWORDS = (
     "POINTS",
     "DATA",
 )
+_FORMAT = "PCD"
+_KEYWORDS_B = {k.encode() for k in _KEYWORDS} | {b"COLUMNS"}
+# longest header line read before the file is refused
+_MAX_LINE_BYTES = 1 << 16
 _MAX_HEADER_LINES = 1000
 _PACKED_COLOR = ("rgb", "rgba")
 
 
 def _fail(path, problem):
     return PointCloudFileError(path, problem)
+
+
+def _parse_first_line(path, prefix):
+    """Refuse a file whose first line is not a PCD header line."""
+    end = prefix.find(b"\n")
+    line = prefix if end < 0 else prefix[:end]
+    if end < 0 and len(prefix) > _MAX_LINE_BYTES:
+        raise _fail(
+            path,
+            f"not a PCD file or a corrupt header: no line end in {_MAX_LINE_BYTES} "
+            "bytes at offset 0.",
+        )
+    key = line.strip().split(maxsplit=1)[:1]
+    if key and not key[0].startswith(b"#") and key[0].upper() not in _KEYWORDS_B:
+        raise _fail(
+            path,
+            "not a PCD file: expected a header starting with '# .PCD', VERSION or "
+            f"FIELDS, found {line[:60]!r}.",
+        )
 
 
 def _parse_header(path, data):
@@ -66,8 +90,15 @@ def _parse_header(path, data):
     for _ in range(_MAX_HEADER_LINES):
         if pos >= len(data):
             break
-        end = data.find(b"\n", pos)
-        end = len(data) if end < 0 else end
+        end = data.find(b"\n", pos, pos + _MAX_LINE_BYTES)
+        if end < 0:
+            if len(data) - pos > _MAX_LINE_BYTES:
+                raise _fail(
+                    path,
+                    f"not a {_FORMAT} file or a corrupt header: no line end in "
+                    f"{_MAX_LINE_BYTES} bytes at offset {pos}.",
+                )
+            end = len(data)
         raw = data[pos:end]
         pos = end + 1
         try:
@@ -376,7 +407,14 @@ def read(path):
         points.
     """
     with open(path, "rb") as fh:
-        data = fh.read()
+        # the first header line is checked on a prefix, then the file is
+        # mapped, not read: a large file that is not a PCD file costs one
+        # line; the map is closed when the last view goes
+        _parse_first_line(path, fh.read(_MAX_LINE_BYTES + 1))
+        try:
+            data = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+        except OSError as exc:
+            raise _fail(path, f"cannot map the file: {exc.strerror}") from None
     header, start = _parse_header(path, data)
     layout, n, info = _layout(path, header)
     body = memoryview(data)[start:]

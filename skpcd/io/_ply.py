@@ -74,6 +74,9 @@ _ENCODINGS = {
     "binary_big_endian": "binary_big_endian",
 }
 _ORDER = {"binary_little_endian": "<", "binary_big_endian": ">"}
+_FORMAT = "PLY"
+# longest header line read before the file is refused
+_MAX_LINE_BYTES = 1 << 16
 _MAX_HEADER_LINES = 10000
 _GROUPED = re.compile(r"(.+)_0")
 
@@ -118,8 +121,15 @@ def _parse_header(path, data):
     for _ in range(_MAX_HEADER_LINES):
         if pos >= len(data):
             break
-        end = data.find(b"\n", pos)
-        end = len(data) if end < 0 else end
+        end = data.find(b"\n", pos, pos + _MAX_LINE_BYTES)
+        if end < 0:
+            if len(data) - pos > _MAX_LINE_BYTES:
+                raise _fail(
+                    path,
+                    f"not a {_FORMAT} file or a corrupt header: no line end in "
+                    f"{_MAX_LINE_BYTES} bytes at offset {pos}.",
+                )
+            end = len(data)
         raw = data[pos:end]
         pos = end + 1
         try:

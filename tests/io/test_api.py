@@ -151,3 +151,31 @@ def test_files_that_are_not_regular_files_are_named_as_such(tmp_path, kind):
     with pytest.raises(PointCloudFileError, match=f"{path}: {expected}") as info:
         read_point_cloud(path)  # never opened: a FIFO would block here
     assert isinstance(info.value, MissingFileError) == (kind in ("broken", "folder"))
+
+
+@pytest.mark.parametrize(
+    ("suffix", "message"),
+    [(".ply", "not a PLY file"), (".pcd", "not a PCD file or a corrupt header")],
+)
+def test_a_large_file_of_zeros_is_refused_before_reading(tmp_path, suffix, message):
+    # before: a 3 GB zero-filled .ply was read whole (3 GB of memory) before
+    # its first bytes were checked; a sparse 4 GB file costs no disk here
+    import subprocess
+    import sys
+
+    path = tmp_path / f"zeros{suffix}"
+    with open(path, "wb") as f:
+        f.truncate(4 << 30)
+    script = (
+        "import resource, sys\n"
+        "resource.setrlimit(resource.RLIMIT_AS, (1 << 30, 1 << 30))\n"
+        "from skpcd.io import read_point_cloud\n"
+        "from skpcd.exceptions import PointCloudFileError\n"
+        f"try:\n    read_point_cloud({str(path)!r})\n"
+        "except PointCloudFileError as exc:\n    print(exc)\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert message in proc.stdout and str(path) in proc.stdout
