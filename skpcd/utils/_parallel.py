@@ -203,31 +203,29 @@ def batch_bounds(sizes, batch_points):
 
 
 def _chosen_backend():
-    """The joblib backend the caller chose with :func:`joblib.parallel_config`
-    (or ``parallel_backend``), or None.
+    """The joblib backend that batches are dispatched to, or None to run
+    in-process.
 
-    None outside such a context, inside a batch of :func:`map_batches`, for
-    the sequential backend, and for the backend joblib itself sets in its
-    workers (a nested one: ``nesting_level`` above 0); then the work runs
-    in-process. joblib 1.3 to 1.6 keep the context in the thread-local
-    ``joblib.parallel._backend.config``, whose ``"backend"`` is the
-    sentinel of ``default_parallel_config`` until one is chosen; no public
-    function tells a chosen backend from the default one.
+    joblib's public :func:`joblib.parallel.get_active_backend` says which
+    backend is active. None (in-process) inside a batch of
+    :func:`map_batches`, for the sequential backend, for a backend joblib
+    itself set in its workers (``nesting_level`` above 0), and for loky,
+    joblib's default: it cannot be told from an explicit
+    ``parallel_config(backend="loky")``, and skpcd's own threads (its
+    kernels release the GIL) use this machine's cores without pickling
+    clouds to worker processes. Every other backend gets the batches:
+    Dask, Ray or any backend registered with
+    :func:`joblib.register_parallel_backend`, and joblib's threading and
+    multiprocessing backends.
     """
     if getattr(_TASK, "n_threads", None) is not None:
         return None
-    try:
-        from joblib import parallel as jp
-        from joblib._parallel_backends import SequentialBackend
+    from joblib.parallel import LokyBackend, SequentialBackend, get_active_backend
 
-        config = getattr(jp._backend, "config", None)
-        chosen = None if config is None else config.get("backend")
-        if chosen is None or chosen is jp.default_parallel_config["backend"]:
-            return None
-        backend, _ = jp.get_active_backend()
-    except (AttributeError, ImportError, KeyError):  # another joblib layout
+    backend, _ = get_active_backend()
+    if isinstance(backend, (LokyBackend, SequentialBackend)):
         return None
-    if isinstance(backend, SequentialBackend) or (backend.nesting_level or 0) > 0:
+    if (getattr(backend, "nesting_level", 0) or 0) > 0:
         return None
     return backend
 
@@ -296,10 +294,12 @@ def map_batches(
     """``func(items, n_jobs)``, in batches of items on a joblib backend.
 
     Outside a :func:`joblib.parallel_config` context that chooses a
-    backend, this is ``func(items, n_jobs)``: one call, in-process, whose
-    kernels run on ``n_jobs`` threads (:func:`effective_threads`). Inside
-    one (``backend="dask"`` with a ``dask.distributed.Client``,
-    ``"loky"``, ``"threading"``...), the items are cut into contiguous
+    backend (and with joblib's default backend, loky, even when chosen:
+    see ``_chosen_backend``), this is ``func(items, n_jobs)``: one call,
+    in-process, whose kernels run on ``n_jobs`` threads
+    (:func:`effective_threads`). Inside one (``backend="dask"`` with a
+    ``dask.distributed.Client``, ``"threading"``, ``"multiprocessing"``,
+    any registered backend), the items are cut into contiguous
     batches of whole items (:func:`batch_bounds`) dispatched with
     :class:`sklearn.utils.parallel.Parallel` (scikit-learn's configuration
     goes with them), and the results are joined in order.
