@@ -11,6 +11,11 @@ from skpcd.preprocessing._normals import _normals_f32, pack_neighborhoods
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
 from skpcd.utils._parallel import map_batches, parallel_rows
+from skpcd.utils._validation import (
+    NORMALS_OPTIONS,
+    _check_given_normals,
+    _has_normal_columns,
+)
 
 __all__ = ["ImprovedPFHTransformer"]
 
@@ -48,11 +53,23 @@ class ImprovedPFHTransformer(CloudTransformer):
         not depend on how the segment is oriented (the box's centre does)
         and it scored at least as well in the smooth-shape experiment of
         the user guide.
+    normals : {"auto", "columns", "estimate"}, default="auto"
+        Where the normals ``n_s`` come from. ``"auto"``: a segment with 6
+        or more columns carries its normals in columns 3-5 (the layout of
+        :class:`~skpcd.preprocessing.NormalEstimator`), used as given; a
+        segment with 3 to 5 columns gets estimated normals. ``"columns"``:
+        every segment carries them (fewer than 6 columns is an error).
+        ``"estimate"``: always estimated, columns 3-5 ignored. Given normals
+        must be unit vectors (a norm more than 1e-3 away from 1 is a
+        ValueError naming the segment); a row with a NaN is a point without
+        a normal, left out. Their sign does not matter (see Notes).
     n_neighbors : int, default=None
-        k for the normals (PCA, PCL's rules); when neither ``n_neighbors``
-        nor ``radius`` is given, k = 10.
+        k for the estimated normals (PCA, PCL's rules); when neither
+        ``n_neighbors`` nor ``radius`` is given, k = 10. Setting it for a
+        segment whose normals are given is an error (it would be ignored).
     radius : float, default=None
-        Radius for the normals instead (the paper uses 0.9 m).
+        Radius for the estimated normals instead (the paper uses 0.9 m);
+        likewise refused with given normals.
     undefined : {"nan", "zero"}, default="nan"
         The row of a segment whose descriptor is undefined: no point has a
         normal (fewer than 3 points, collinear points), or all points are
@@ -88,8 +105,9 @@ class ImprovedPFHTransformer(CloudTransformer):
     descriptor depends on the normal's line only, and is invariant to any
     rigid motion of the segment (up to float rounding at bin edges).
 
-    *Points.* Points without a normal are left out; the histogram is
-    normalised over the others.
+    *Points.* Points without a normal (an undefined estimate, or a given
+    normal with a NaN) are left out; the histogram is normalised over the
+    others.
 
     References
     ----------
@@ -112,6 +130,7 @@ class ImprovedPFHTransformer(CloudTransformer):
         "variant": [StrOptions({"pfh", "fpfh"})],
         "n_bins": [Interval(Integral, 2, None, closed="left"), None],
         "middle": [StrOptions(set(MIDDLES))],
+        "normals": [StrOptions(set(NORMALS_OPTIONS))],
         "n_neighbors": [Interval(Integral, 3, None, closed="left"), None],
         "radius": [Interval(Real, 0, None, closed="neither"), None],
         "undefined": [StrOptions({"nan", "zero"})],
@@ -124,6 +143,7 @@ class ImprovedPFHTransformer(CloudTransformer):
         *,
         n_bins=None,
         middle="centroid",
+        normals="auto",
         n_neighbors=None,
         radius=None,
         undefined="nan",
@@ -132,6 +152,7 @@ class ImprovedPFHTransformer(CloudTransformer):
         self.variant = variant
         self.n_bins = n_bins
         self.middle = middle
+        self.normals = normals
         self.n_neighbors = n_neighbors
         self.radius = radius
         self.undefined = undefined
@@ -152,7 +173,17 @@ class ImprovedPFHTransformer(CloudTransformer):
                 "give n_neighbors or radius, not both "
                 f"(n_neighbors={self.n_neighbors}, radius={self.radius})"
             )
-        return check_point_clouds(X)
+        clouds = check_point_clouds(X, ensure_all_finite=False)
+        for i, c in enumerate(clouds):
+            if not np.isfinite(c[:, :3]).all():
+                raise ValueError(f"X[{i}] has NaN or infinite coordinates.")
+        estimation = [
+            name
+            for name in ("n_neighbors", "radius")
+            if getattr(self, name) is not None
+        ]
+        _check_given_normals(clouds, self.normals, estimation=estimation)
+        return clouds
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, X, y=None):
@@ -161,7 +192,8 @@ class ImprovedPFHTransformer(CloudTransformer):
         Parameters
         ----------
         X : sequence of ndarray of shape (n_points_i, 3+)
-            The segments.
+            The segments, xyz first; with ``normals="auto"`` (the default)
+            columns 3-5 of a segment with 6 or more columns are its normals.
         y : None
             Ignored.
 
@@ -180,7 +212,9 @@ class ImprovedPFHTransformer(CloudTransformer):
         Parameters
         ----------
         X : sequence of ndarray of shape (n_points_i, 3+)
-            The segments; only xyz is used.
+            The segments, xyz first; with ``normals="auto"`` (the default)
+            columns 3-5 of a segment with 6 or more columns are its normals,
+            other columns are ignored.
 
         Returns
         -------
@@ -196,16 +230,26 @@ class ImprovedPFHTransformer(CloudTransformer):
         """:meth:`transform` of validated clouds (one batch of them)."""
         from skpcd.features._pfh_kernels import improved_rows
 
-        k = self.n_neighbors
-        if k is None and self.radius is None:
-            k = 10
-        xyz, offsets, nb = pack_neighborhoods(
-            clouds, n_neighbors=k, radius=self.radius, n_jobs=n_jobs,
-            with_sqdist=False,
-        )  # fmt: skip
-        p = xyz.astype(np.float32)
-        n = _normals_f32(p, nb, np.zeros(3), n_jobs)[0]
-        del nb
+        given = [_has_normal_columns(c, self.normals) for c in clouds]
+        offsets = np.zeros(len(clouds) + 1, dtype=np.int64)
+        np.cumsum([len(c) for c in clouds], out=offsets[1:])
+        if all(given):  # no search
+            xyz = np.vstack([c[:, :3] for c in clouds]).astype(np.float64)
+            n = np.vstack([c[:, 3:6] for c in clouds]).astype(np.float32)
+            p = xyz.astype(np.float32)
+        else:
+            k = self.n_neighbors
+            if k is None and self.radius is None:
+                k = 10
+            xyz, offsets, nb = pack_neighborhoods(
+                clouds, n_neighbors=k, radius=self.radius, n_jobs=n_jobs,
+                with_sqdist=False,
+            )  # fmt: skip
+            p = xyz.astype(np.float32)
+            n = _normals_f32(p, nb, np.zeros(3), n_jobs)[0]
+            del nb
+            for i in np.flatnonzero(given):  # "auto" on a mixed batch
+                n[offsets[i] : offsets[i + 1]] = clouds[i][:, 3:6]
         n_bins, mode = self._bins(), 0 if self.variant == "pfh" else 1
         out = np.zeros((len(clouds), self._width()))
         middle = MIDDLES.index(self.middle)

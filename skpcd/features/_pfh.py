@@ -27,6 +27,12 @@ from skpcd.utils._parallel import (
     parallel_rows,
     release_free_memory,
 )
+from skpcd.utils._validation import (
+    NORMALS_OPTIONS,
+    _check_given_normals,
+    _check_unit_normals,
+    _has_normal_columns,
+)
 
 __all__ = ["FPFHTransformer", "PFHTransformer", "compute_fpfh", "compute_pfh"]
 
@@ -38,6 +44,7 @@ def _as_f32(points, normals, neighborhoods):
     n = np.ascontiguousarray(normals, dtype=np.float32)
     if n.shape != p.shape:
         raise ValueError(f"normals must have shape {p.shape}, got {n.shape}")
+    _check_unit_normals(n)
     if not isinstance(neighborhoods, Neighborhoods):
         raise TypeError("neighborhoods must come from compute_neighborhoods")
     if neighborhoods.n_points != len(p):
@@ -73,7 +80,9 @@ def compute_pfh(
     points : array-like of shape (n_points, 3+)
         The cloud (float32 precision is used, as in PCL).
     normals : array-like of shape (n_points, 3)
-        Unit normals; NaN normals are binned as PCL bins them (bin 0).
+        Unit normals, used as given (PCL ``setInputNormals``): a norm more
+        than 1e-3 away from 1 is an error. A row with a NaN is an undefined
+        normal, binned as PCL bins it: its pairs' NaN angles go to bin 0.
     n_neighbors, radius : int or float, default=None
         The neighbourhood search, unless ``neighborhoods`` is given.
     neighborhoods : Neighborhoods, default=None
@@ -88,6 +97,12 @@ def compute_pfh(
     -------
     pfh : ndarray of shape (n_points, n_bins ** 3), dtype float32
         Rows sum to 100; a point alone in its neighbourhood gets zeros.
+
+    Raises
+    ------
+    ValueError
+        If ``normals`` has another shape than the points, or a row without
+        NaN that is not a unit vector.
     """
     nb = _neighborhoods(points, neighborhoods, n_neighbors, radius, n_jobs)
     p, n = _as_f32(points, normals, nb)
@@ -196,7 +211,7 @@ def _space_order(p, radius):
 _BLOCK = 2048
 
 
-def _pfh_radius_blocked(clouds, radius, n_bins, normals_from, viewpoint, n_jobs):
+def _pfh_radius_blocked(clouds, radius, n_bins, given, viewpoint, n_jobs):
     """PFH with a radius search, neighbourhoods block by block.
 
     Memory stays that of the output, the points and their normals: the
@@ -204,7 +219,9 @@ def _pfh_radius_blocked(clouds, radius, n_bins, normals_from, viewpoint, n_jobs)
     A first pass counts the neighbours of every point (and estimates its
     normal from the sorted ball, storing nothing else); a second stores a
     block's neighbourhoods and bins their pairs. The same two passes over
-    the grid as one search of all neighbourhoods. Returns ``out,
+    the grid as one search of all neighbourhoods. ``given`` is ``(normals,
+    mask)`` as :meth:`_LocalDescriptor._given_normals`: the normals of the
+    points in ``mask`` are given, the others estimated. Returns ``out,
     undefined, offsets`` as :meth:`_LocalDescriptor._compute`.
     """
     from skpcd.features._pfh_kernels import ROW_MIN
@@ -242,7 +259,8 @@ def _pfh_radius_blocked(clouds, radius, n_bins, normals_from, viewpoint, n_jobs)
         parallel_rows(run, c1 - c0, n_jobs, *search, *args, **few)
 
     blocks = list(itertools.pairwise(bounds))
-    if normals_from is None:
+    given, mask = given
+    if given is None or not mask.all():
         # normals straight from each ball, sorted, nothing stored
         n = np.empty((n_pts, 3), dtype=np.float32)
         curvature = np.empty(n_pts, dtype=np.float32)
@@ -251,8 +269,12 @@ def _pfh_radius_blocked(clouds, radius, n_bins, normals_from, viewpoint, n_jobs)
             t0, t1 = int(cell_start[c0]), int(cell_start[c1])
             ball(c0, c1, none, counts[t0:t1], none_i, *est, True)
         del curvature, est
+        if given is not None:  # "auto" on clouds with and without normals
+            n[mask] = given[mask]
+        del given, mask
     else:
-        n = normals_from
+        n = given
+        del given, mask
         for c0, c1 in blocks:
             t0, t1 = int(cell_start[c0]), int(cell_start[c1])
             ball(c0, c1, none, counts[t0:t1], none_i, *no_normals, True)
@@ -369,7 +391,9 @@ def compute_fpfh(
     points : array-like of shape (n_points, 3+)
         The cloud (float32 precision is used, as in PCL).
     normals : array-like of shape (n_points, 3)
-        Unit normals.
+        Unit normals, used as given (PCL ``setInputNormals``): a norm more
+        than 1e-3 away from 1 is an error. A row with a NaN is an undefined
+        normal, binned as PCL bins it: its pairs' NaN angles go to bin 0.
     n_neighbors, radius : int or float, default=None
         The neighbourhood search, unless ``neighborhoods`` is given.
     neighborhoods : Neighborhoods, default=None
@@ -392,6 +416,12 @@ def compute_fpfh(
     fpfh : ndarray of shape (n_points, 3 * n_bins), dtype float32
         One row per point. A point without a neighbour at a non-zero
         distance gets zeros (``"pcl"``) or its own SPFH.
+
+    Raises
+    ------
+    ValueError
+        If ``convention`` is unknown, ``normals`` has another shape than the
+        points, or a row without NaN that is not a unit vector.
     """
     if convention not in FPFH_CONVENTIONS:
         raise ValueError(
@@ -409,7 +439,7 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         "n_neighbors": [Interval(Integral, 2, None, closed="left"), None],
         "radius": [Interval(Real, 0, None, closed="neither"), None],
         "n_bins": [Interval(Integral, 2, None, closed="left")],
-        "normals": [StrOptions({"estimate", "columns"})],
+        "normals": [StrOptions(set(NORMALS_OPTIONS))],
         "normal_n_neighbors": [Interval(Integral, 3, None, closed="left"), None],
         "normal_radius": [Interval(Real, 0, None, closed="neither"), None],
         "viewpoint": ["array-like"],
@@ -434,12 +464,36 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         for i, c in enumerate(clouds):
             if not np.isfinite(c[:, :3]).all():
                 raise ValueError(f"X[{i}] has NaN or infinite coordinates.")
-            if self.normals == "columns" and c.shape[1] < 6:
-                raise ValueError(
-                    f"X[{i}] has {c.shape[1]} columns; normals='columns' reads the "
-                    "normals from columns 3-5."
-                )
+        _check_given_normals(clouds, self.normals, estimation=self._estimation_set())
         return clouds
+
+    def _estimation_set(self):
+        """The parameters of the normal estimation set away from their default."""
+        names = [
+            name
+            for name in ("normal_n_neighbors", "normal_radius")
+            if getattr(self, name) is not None
+        ]
+        if np.any(_check_viewpoint(self.viewpoint) != 0):
+            names.append("viewpoint")
+        return names
+
+    def _given_normals(self, clouds):
+        """The normals given in the clouds' columns 3-5, packed as float32,
+        and the mask of the points that have them (NaN rows elsewhere);
+        ``(None, None)`` when every cloud's normals are to be estimated."""
+        given = [_has_normal_columns(c, self.normals) for c in clouds]
+        if not any(given):
+            return None, None
+        if all(given):
+            n = np.vstack([c[:, 3:6] for c in clouds]).astype(np.float32)
+            return n, np.ones(len(n), dtype=bool)
+        blocks = [
+            c[:, 3:6] if g else np.full((len(c), 3), np.nan)
+            for c, g in zip(clouds, given)
+        ]
+        mask = np.repeat(np.asarray(given), [len(c) for c in clouds])
+        return np.vstack(blocks).astype(np.float32), mask
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, X, y=None):
@@ -448,8 +502,8 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         Parameters
         ----------
         X : sequence of ndarray of shape (n_points_i, 3+)
-            The clouds, with normals in columns 3-5 when
-            ``normals="columns"``.
+            The clouds, xyz first; with ``normals="auto"`` (the default)
+            columns 3-5 of a cloud with 6 or more columns are its normals.
         y : None
             Ignored.
 
@@ -468,8 +522,8 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         Parameters
         ----------
         X : sequence of ndarray of shape (n_points_i, 3+)
-            The clouds, with normals in columns 3-5 when
-            ``normals="columns"``.
+            The clouds, xyz first; with ``normals="auto"`` (the default)
+            columns 3-5 of a cloud with 6 or more columns are its normals.
         y : None
             Ignored.
 
@@ -498,8 +552,9 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
             with_sqdist=False,
         )  # fmt: skip
         p = xyz.astype(np.float32)
-        if self.normals == "columns":
-            n = np.vstack([c[:, 3:6] for c in clouds]).astype(np.float32)
+        given, mask = self._given_normals(clouds)
+        if given is not None and mask.all():
+            n = given
         else:
             nnb = nb
             if self.normal_n_neighbors is not None or self.normal_radius is not None:
@@ -513,7 +568,9 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
             vp = _check_viewpoint(self.viewpoint)
             n = _normals_f32(p, nnb, vp, n_jobs)[0]
             del nnb
-        del xyz  # the descriptors work in float32
+            if given is not None:  # "auto" on clouds with and without normals
+                n[mask] = given[mask]
+        del xyz, given, mask  # the descriptors work in float32
         undefined = ~np.isfinite(n).all(axis=1) | (nb.sizes < 2)
         # the kernel takes the normals out of the list: they are freed as
         # soon as it no longer needs them (FPFH: after the SPFH)
@@ -528,10 +585,11 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
     def undefined_mask(self, X):
         """Which points have an undefined descriptor.
 
-        A descriptor is undefined where the point's normal is undefined (fewer
-        than 3 neighbours, or a collinear neighbourhood) or the point has no
-        neighbour but itself. What :meth:`transform` does with those points is
-        set by ``undefined``.
+        A descriptor is undefined where the point's normal is undefined
+        (estimated: fewer than 3 neighbours, or a collinear neighbourhood;
+        given: a row with a NaN) or the point has no neighbour but itself.
+        What :meth:`transform` does with those points is set by
+        ``undefined``.
 
         Parameters
         ----------
@@ -557,8 +615,8 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         Parameters
         ----------
         X : sequence of ndarray of shape (n_points_i, 3+)
-            The clouds, with normals in columns 3-5 when
-            ``normals="columns"``.
+            The clouds, xyz first; with ``normals="auto"`` (the default)
+            columns 3-5 of a cloud with 6 or more columns are its normals.
 
         Returns
         -------
@@ -643,22 +701,37 @@ _COMMON_PARAMS = """
         Radius search instead (PCL ``setRadiusSearch``); give one of the two.
     n_bins : int, default=@N_BINS@
         Bins per feature (@BINS_DOC@).
-    normals : {"estimate", "columns"}, default="estimate"
-        Estimate the normals (PCA, PCL's rules, see
-        :func:`~skpcd.preprocessing.estimate_normals`) or read them from
-        columns 3-5 of each cloud.
+    normals : {"auto", "columns", "estimate"}, default="auto"
+        Where the normals come from. ``"auto"``: a cloud with 6 or more
+        columns carries its normals in columns 3-5 (the layout of
+        :class:`~skpcd.preprocessing.NormalEstimator`, and of PCL's
+        ``PointNormal``), used as given, as PCL's ``setInputNormals`` uses
+        them; a cloud with 3 to 5 columns gets estimated normals (PCA,
+        PCL's rules, see :func:`~skpcd.preprocessing.estimate_normals`).
+        ``"columns"``: every cloud carries them (fewer than 6 columns is an
+        error). ``"estimate"``: always estimated, columns 3-5 ignored.
+        Given normals are not renormalised: a norm more than 1e-3 away from
+        1 is a ValueError naming the cloud. A row with a NaN is an undefined
+        normal, as PCL's ``NormalEstimation`` writes it (see
+        ``undefined``).
     normal_n_neighbors : int, default=None
-        k for the normals; by default the descriptor's own neighbourhoods
-        are reused (one search for both).
+        k for the estimated normals; by default the descriptor's own
+        neighbourhoods are reused (one search for both). Setting it for a
+        cloud whose normals are given is an error (it would be ignored).
     normal_radius : float, default=None
-        Radius for the normals instead.
+        Radius for the estimated normals instead; likewise refused with
+        given normals.
     viewpoint : tuple of 3 float, default=(0.0, 0.0, 0.0)
-        Normals face this point (PCL ``setViewPoint``).
+        Estimated normals face this point (PCL ``setViewPoint``). Given
+        normals keep their sign: another viewpoint with given normals is an
+        error.
     undefined : {"nan", "zero", "drop", "keep"}, default="nan"
-        Points whose descriptor is undefined (their normal is undefined, or
-        they have no neighbour): a NaN row, a zero row, no row, or the value
-        PCL computes for them anyway ("keep", which bins NaN features in
-        bin 0). :meth:`undefined_mask` says which points they are.
+        Points whose descriptor is undefined (their normal is undefined,
+        estimated or given as NaN, or they have no neighbour): a NaN row, a
+        zero row, no row, or the value PCL computes for them anyway
+        ("keep", which bins NaN features in bin 0). As a neighbour, a point
+        with a NaN normal is binned as PCL bins it (bin 0) whatever the
+        policy. :meth:`undefined_mask` says which points they are.
     pooling : {"mean", "sum", "max"}, default=None
         Return one row per cloud, pooled over its defined rows, instead of a
         list of per-point arrays.
@@ -730,7 +803,7 @@ class PFHTransformer(_LocalDescriptor):
         *,
         radius=None,
         n_bins=5,
-        normals="estimate",
+        normals="auto",
         normal_n_neighbors=None,
         normal_radius=None,
         viewpoint=(0.0, 0.0, 0.0),
@@ -758,11 +831,9 @@ class PFHTransformer(_LocalDescriptor):
         ):
             return super()._compute(clouds, n_jobs)
         # radius search: neighbourhoods block by block (memory)
-        normals = None
-        if self.normals == "columns":
-            normals = np.vstack([c[:, 3:6] for c in clouds]).astype(np.float32)
+        given = self._given_normals(clouds)
         vp = _check_viewpoint(self.viewpoint)
-        args = (float(self.radius), int(self.n_bins), normals, vp, n_jobs)
+        args = (float(self.radius), int(self.n_bins), given, vp, n_jobs)
         return _pfh_radius_blocked(clouds, *args)
 
     def _kernel(self, p, normals, nb, n_jobs):
@@ -821,7 +892,7 @@ class FPFHTransformer(_LocalDescriptor):
         *,
         radius=None,
         n_bins=11,
-        normals="estimate",
+        normals="auto",
         normal_n_neighbors=None,
         normal_radius=None,
         viewpoint=(0.0, 0.0, 0.0),

@@ -142,8 +142,12 @@ class NormalEstimator(CloudTransformer):
     The pipeline form of :func:`estimate_normals`: each cloud ``(n, 3+)``
     becomes ``(n, 6)`` with the normals in columns 3-5 (``(n, 7)`` with the
     curvature in column 6), the layout that
-    :class:`~skpcd.features.PFHTransformer` reads with
-    ``normals="columns"``. Extra input columns are not carried over.
+    :class:`~skpcd.features.PFHTransformer`,
+    :class:`~skpcd.features.FPFHTransformer` and
+    :class:`~skpcd.features.ImprovedPFHTransformer` use as given (their
+    default ``normals="auto"``). Extra input columns are not carried over:
+    normals already in columns 3-5 are replaced by the estimate, which is
+    what this transformer is for.
 
     Read more in the :ref:`User Guide <local_descriptors>`.
 
@@ -216,12 +220,14 @@ class NormalEstimator(CloudTransformer):
         Parameters
         ----------
         X : sequence of ndarray of shape (n_points_i, 3+)
-            The clouds.
+            The clouds; only xyz is read (normals in columns 3-5 are
+            re-estimated).
 
         Returns
         -------
         clouds : list of ndarray of shape (n_points_i, 6) or (n_points_i, 7)
-            xyz, the normals, and the curvature if asked.
+            xyz, the normals (NaN where undefined, as in PCL), and the
+            curvature if asked.
         """
         clouds = check_point_clouds(X)
         _check_viewpoint(self.viewpoint)

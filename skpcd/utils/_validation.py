@@ -7,6 +7,13 @@ from sklearn.utils import check_array
 
 __all__ = ["check_point_clouds"]
 
+# How far from 1 the norm of a given normal may be: normals computed in
+# float32 (PCL's, skpcd's) are within 1e-6, normals written to text files
+# with 4 decimals within 2e-4.
+NORMAL_ATOL = 1e-3
+
+NORMALS_OPTIONS = ("auto", "columns", "estimate")
+
 
 def _as_sequence(X, input_name):
     """Return X as a list of per-cloud objects without stacking it."""
@@ -151,3 +158,109 @@ def check_point_clouds(
             )
         clouds.append(cloud)
     return clouds
+
+
+def _has_normal_columns(cloud, normals):
+    """Whether ``normals`` takes the normals of ``cloud`` from its columns 3-5."""
+    if normals == "estimate":
+        return False
+    return normals == "columns" or cloud.shape[1] >= 6
+
+
+def _check_unit_normals(normals, *, input_name="normals", columns="", hint=""):
+    """Check that normals are unit vectors; a row with a NaN is undefined.
+
+    Given normals are used as they are, as PCL's ``setInputNormals`` uses
+    them: nothing is renormalised, so a vector that is not of unit length
+    would silently bend every angle of the descriptors.
+
+    Parameters
+    ----------
+    normals : array-like of shape (n_points, 3)
+        The normals.
+    input_name : str, default="normals"
+        Name used in the error message.
+    columns : str, default=""
+        Where the normals are, said after "normals" in the message.
+    hint : str, default=""
+        Appended to the error message (what else the caller can do).
+
+    Returns
+    -------
+    undefined : ndarray of bool of shape (n_points,)
+        The rows with a NaN: undefined normals (PCL's ``NormalEstimation``
+        writes NaN where it cannot fit a plane).
+
+    Raises
+    ------
+    ValueError
+        If a row without NaN is infinite or its norm differs from 1 by more
+        than ``NORMAL_ATOL`` (1e-3); the message counts them and names the
+        first.
+    """
+    v = np.asarray(normals, dtype=np.float64)
+    undefined = np.isnan(v).any(axis=1)
+    with np.errstate(over="ignore", invalid="ignore"):
+        norm = np.sqrt(np.einsum("ij,ij->i", v, v))
+    bad = np.flatnonzero(~undefined & ~(np.abs(norm - 1.0) <= NORMAL_ATOL))
+    if len(bad):
+        first = bad[0]
+        raise ValueError(
+            f"{input_name}: {len(bad)} of {len(v)} normals{columns} are not unit "
+            f"vectors (|norm - 1| > {NORMAL_ATOL:g}); the first is row {first}, norm "
+            f"{norm[first]:.6g}. Given normals are used as they are (as PCL "
+            "does): normalise them (n / np.linalg.norm(n, axis=1, keepdims=True)) "
+            f"and write NaN where a normal is undefined{hint}."
+        )
+    return undefined
+
+
+def _check_given_normals(clouds, normals, *, estimation=(), input_name="X"):
+    """Which clouds carry their normals in columns 3-5, those normals checked.
+
+    Parameters
+    ----------
+    clouds : list of ndarray of shape (n_points_i, 3+)
+        Validated clouds.
+    normals : {"auto", "columns", "estimate"}
+        ``"auto"``: the clouds with 6 or more columns carry normals;
+        ``"columns"``: every cloud does (fewer than 6 columns is an error);
+        ``"estimate"``: none (the columns are not read).
+    estimation : sequence of str, default=()
+        Names of the parameters, set away from their default, that only
+        control how normals are estimated: an error for a cloud whose
+        normals are given, as they would be ignored.
+    input_name : str, default="X"
+        Name used in error messages.
+
+    Returns
+    -------
+    given : list of bool
+        One per cloud: True where its normals are columns 3-5.
+    """
+    given = []
+    for i, c in enumerate(clouds):
+        where = f"{input_name}[{i}]"
+        if normals == "columns" and c.shape[1] < 6:
+            raise ValueError(
+                f"{where} has {c.shape[1]} columns; normals='columns' reads the "
+                "normals from columns 3-5."
+            )
+        has = _has_normal_columns(c, normals)
+        if has and estimation:
+            names = " and ".join(estimation)
+            raise ValueError(
+                f"{where} has normals in columns 3-5, which normals={normals!r} "
+                f"uses as they are; {names} only set how normals are estimated "
+                "and would be ignored. Pass normals='estimate' to estimate the "
+                f"normals instead, or leave {names} at the default."
+            )
+        if has:
+            _check_unit_normals(
+                c[:, 3:6],
+                input_name=where,
+                columns=" (columns 3-5)",
+                hint=", or pass normals='estimate' to estimate them instead",
+            )
+        given.append(has)
+    return given

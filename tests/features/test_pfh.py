@@ -390,7 +390,7 @@ def test_feature_names_match_the_pooled_columns(est, names):
     assert [got[0], got[-1]] == names
 
 
-@pytest.mark.parametrize("normals", ["estimate", "columns"])
+@pytest.mark.parametrize("normals", ["estimate", "columns", "auto"])
 def test_radius_pfh_in_blocks_equals_one_pass(monkeypatch, normals):
     # the radius PFHTransformer searches and bins block by block (memory);
     # every row must be the one-pass result, whatever the blocks
@@ -401,7 +401,8 @@ def test_radius_pfh_in_blocks_equals_one_pass(monkeypatch, normals):
     for n in (700, 5, 1, 900):  # a tiny cloud: undefined normals and rows
         c = rng.uniform(0, 3, (n, 3))
         c[:, 2] *= 0.05
-        clouds.append(np.c_[c, rng.normal(size=(n, 3))])
+        n_c = rng.normal(size=(n, 3))  # given normals must be unit vectors
+        clouds.append(np.c_[c, n_c / np.linalg.norm(n_c, axis=1, keepdims=True)])
     clouds[3][:30, :3] = clouds[3][30:60, :3]  # duplicates
     # pairs whose bins depend on which point comes first (|a1| == |a2|)
     line = np.c_[0.01 * np.arange(60), np.zeros((60, 2))]

@@ -107,3 +107,17 @@ def test_estimator_layout():
         n, k = estimate_normals(c, n_neighbors=6)
         np.testing.assert_array_equal(o[:, 3:6], n)
         np.testing.assert_array_equal(o[:, 6], k)
+
+
+def test_estimator_replaces_given_normals():
+    # NormalEstimator always estimates: normals already in columns 3-5 are
+    # replaced (the descriptors, by default, use given normals instead)
+    clouds = make_point_clouds(2, n_points=(30, 40), random_state=2)
+    given = [np.c_[c, np.tile([0.0, 0.0, 1.0], (len(c), 1))] for c in clouds]
+    est = NormalEstimator(n_neighbors=8)
+    for a, b in zip(est.fit_transform(given), est.fit_transform(clouds)):
+        np.testing.assert_array_equal(a, b)
+    # its output has unit (or NaN) normals, as the descriptors require
+    for o in est.fit_transform(clouds):
+        norm = np.linalg.norm(o[:, 3:6], axis=1)
+        assert np.all(np.isnan(norm) | (np.abs(norm - 1) < 1e-6))
