@@ -332,11 +332,15 @@ def test_approximate_assignment_agrees_with_exact_on_real_pfh(dales_pfh):
     assert np.minimum(a, e).sum() / e.sum() >= 0.98
 
 
-def test_auto_assignment_threshold():
+def test_auto_assignment_threshold(monkeypatch):
+    # the documented threshold, then the rule at a small threshold (fitting
+    # 2047 words to check it took 114 s)
+    assert BagOfFeatures._APPROXIMATE_MIN_WORDS == 2048
+    monkeypatch.setattr(BagOfFeatures, "_APPROXIMATE_MIN_WORDS", 16)
     rng = np.random.default_rng(0)
-    X = [rng.normal(size=(3000, 3)), rng.normal(size=(1000, 3))]
+    X = [rng.normal(size=(300, 3)), rng.normal(size=(100, 3))]
     quick = KMeans(n_init=1, max_iter=1, init="random")
-    for n_words, want in [(2047, "exact"), (2048, "approximate")]:
+    for n_words, want in [(15, "exact"), (16, "approximate")]:
         bof = BagOfFeatures(n_words, clusterer=quick, random_state=0).fit(X)
         assert bof.assignment_ == want
     assert hasattr(bof, "_index")
