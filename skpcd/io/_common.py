@@ -1,8 +1,32 @@
-"""Helpers shared by the binary formats' writers (PLY, PCD)."""
+"""Helpers shared by the binary formats (PLY, PCD): header lines, writers."""
 
 import io
 
 import numpy as np
+
+from skpcd.exceptions import PointCloudFileError
+
+# longest header line read before a file is refused
+MAX_LINE_BYTES = 1 << 16
+
+
+def header_line(path, data, pos, fmt):
+    """The raw bytes of the header line at ``pos`` and the offset after it.
+
+    ``data`` may be a memory map: a line is searched for in at most
+    :data:`MAX_LINE_BYTES`, so a large file that is not a ``fmt`` file
+    costs that much, not its size.
+    """
+    end = data.find(b"\n", pos, pos + MAX_LINE_BYTES)
+    if end < 0:
+        if len(data) - pos > MAX_LINE_BYTES:
+            raise PointCloudFileError(
+                path,
+                f"not a {fmt} file or a corrupt header: no line end in "
+                f"{MAX_LINE_BYTES} bytes at offset {pos}.",
+            )
+        end = len(data)
+    return data[pos:end], end + 1
 
 
 def is_float32_exact(values):

@@ -35,7 +35,13 @@ import re
 import numpy as np
 
 from skpcd.exceptions import PointCloudFileError
-from skpcd.io._common import ascii_rows, float_format, is_float32_exact
+from skpcd.io._common import (
+    MAX_LINE_BYTES,
+    ascii_rows,
+    float_format,
+    header_line,
+    is_float32_exact,
+)
 from skpcd.io._lzf import LZFError, lzf_compress, lzf_decompress_array
 
 _ENCODINGS = ("ascii", "binary", "binary_compressed")
@@ -52,10 +58,7 @@ _KEYWORDS = (
     "POINTS",
     "DATA",
 )
-_FORMAT = "PCD"
 _KEYWORDS_B = {k.encode() for k in _KEYWORDS} | {b"COLUMNS"}
-# longest header line read before the file is refused
-_MAX_LINE_BYTES = 1 << 16
 _MAX_HEADER_LINES = 1000
 _PACKED_COLOR = ("rgb", "rgba")
 
@@ -68,10 +71,10 @@ def _parse_first_line(path, prefix):
     """Refuse a file whose first line is not a PCD header line."""
     end = prefix.find(b"\n")
     line = prefix if end < 0 else prefix[:end]
-    if end < 0 and len(prefix) > _MAX_LINE_BYTES:
+    if end < 0 and len(prefix) > MAX_LINE_BYTES:
         raise _fail(
             path,
-            f"not a PCD file or a corrupt header: no line end in {_MAX_LINE_BYTES} "
+            f"not a PCD file or a corrupt header: no line end in {MAX_LINE_BYTES} "
             "bytes at offset 0.",
         )
     key = line.strip().split(maxsplit=1)[:1]
@@ -90,17 +93,7 @@ def _parse_header(path, data):
     for _ in range(_MAX_HEADER_LINES):
         if pos >= len(data):
             break
-        end = data.find(b"\n", pos, pos + _MAX_LINE_BYTES)
-        if end < 0:
-            if len(data) - pos > _MAX_LINE_BYTES:
-                raise _fail(
-                    path,
-                    f"not a {_FORMAT} file or a corrupt header: no line end in "
-                    f"{_MAX_LINE_BYTES} bytes at offset {pos}.",
-                )
-            end = len(data)
-        raw = data[pos:end]
-        pos = end + 1
+        raw, pos = header_line(path, data, pos, "PCD")
         try:
             line = raw.decode("ascii").strip()
         except UnicodeDecodeError:
@@ -410,7 +403,7 @@ def read(path):
         # the first header line is checked on a prefix, then the file is
         # mapped, not read: a large file that is not a PCD file costs one
         # line; the map is closed when the last view goes
-        _parse_first_line(path, fh.read(_MAX_LINE_BYTES + 1))
+        _parse_first_line(path, fh.read(MAX_LINE_BYTES + 1))
         try:
             data = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
         except OSError as exc:

@@ -37,7 +37,7 @@ import numba
 import numpy as np
 
 from skpcd.exceptions import PointCloudFileError
-from skpcd.io._common import ascii_rows, float_format, is_float32_exact
+from skpcd.io._common import ascii_rows, float_format, header_line, is_float32_exact
 
 _TYPES = {
     "char": "i1",
@@ -74,9 +74,6 @@ _ENCODINGS = {
     "binary_big_endian": "binary_big_endian",
 }
 _ORDER = {"binary_little_endian": "<", "binary_big_endian": ">"}
-_FORMAT = "PLY"
-# longest header line read before the file is refused
-_MAX_LINE_BYTES = 1 << 16
 _MAX_HEADER_LINES = 10000
 _GROUPED = re.compile(r"(.+)_0")
 
@@ -121,17 +118,7 @@ def _parse_header(path, data):
     for _ in range(_MAX_HEADER_LINES):
         if pos >= len(data):
             break
-        end = data.find(b"\n", pos, pos + _MAX_LINE_BYTES)
-        if end < 0:
-            if len(data) - pos > _MAX_LINE_BYTES:
-                raise _fail(
-                    path,
-                    f"not a {_FORMAT} file or a corrupt header: no line end in "
-                    f"{_MAX_LINE_BYTES} bytes at offset {pos}.",
-                )
-            end = len(data)
-        raw = data[pos:end]
-        pos = end + 1
+        raw, pos = header_line(path, data, pos, "PLY")
         try:
             line = raw.decode("ascii").strip()
         except UnicodeDecodeError:
