@@ -28,23 +28,8 @@ def test_info_bad_file_is_a_clean_error(tmp_path, capsys):
     assert "error" in err and str(path) in err and "Traceback" not in err
 
 
-def _labelled_folder(folder, n_per_class=6, random_state=1):
-    from skpcd.datasets import make_urban_objects
-
-    clouds, labels = make_urban_objects(
-        n_per_class=n_per_class, random_state=random_state
-    )
-    folder.mkdir(exist_ok=True)
-    rows = ["file,label"]
-    for i, (c, y) in enumerate(zip(clouds, labels)):
-        write_point_cloud(folder / f"{i:03d}.xyz", c)
-        rows.append(f"{i:03d}.xyz,{y}")
-    (folder / "labels.csv").write_text("\n".join(rows))
-    return labels
-
-
-def test_evaluate_folder(tmp_path, capsys):
-    _labelled_folder(tmp_path)
+def test_evaluate_folder(tmp_path, capsys, labelled_folder):
+    labelled_folder(tmp_path)
     assert main(["evaluate", str(tmp_path), "--folds", "3", "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "30 segments, 5 classes" in out
@@ -87,12 +72,12 @@ def test_console_entry_point_default_data_quiet_when_not_a_tty():
     assert proc.stderr == ""  # no progress bar when not on a terminal
 
 
-def test_fit_predict_describe_round_trip(tmp_path, capsys):
+def test_fit_predict_describe_round_trip(tmp_path, capsys, labelled_folder):
     import csv
 
     train, test = tmp_path / "train", tmp_path / "test"
-    _labelled_folder(train, n_per_class=8, random_state=1)
-    truth = _labelled_folder(test, n_per_class=4, random_state=2)
+    labelled_folder(train, n_per_class=8, random_state=1)
+    truth = labelled_folder(test, n_per_class=4, random_state=2)
     (test / "labels.csv").unlink()  # predict needs no labels
     model = tmp_path / "model.joblib"
     assert main(["fit", str(train), "-o", str(model), "--quiet"]) == 0
@@ -118,14 +103,16 @@ def test_fit_predict_describe_round_trip(tmp_path, capsys):
     assert d["fpfh_offsets"][-1] == len(d["fpfh"]) and d["fpfh"].shape[1] == 33
 
 
-def test_case_based_pipeline_fit_predict_gives_similarities(tmp_path, capsys):
+def test_case_based_pipeline_fit_predict_gives_similarities(
+    tmp_path, capsys, labelled_folder
+):
     import csv
 
     from skpcd.io import load_model
 
     train, test = tmp_path / "train", tmp_path / "test"
-    _labelled_folder(train, n_per_class=8, random_state=1)
-    truth = _labelled_folder(test, n_per_class=4, random_state=2)
+    labelled_folder(train, n_per_class=8, random_state=1)
+    truth = labelled_folder(test, n_per_class=4, random_state=2)
     model = tmp_path / "model.joblib"
     args = ["fit", str(train), "-o", str(model), "--pipeline", "case-based"]
     assert main([*args, "--quiet"]) == 0
@@ -149,8 +136,10 @@ def test_case_based_pipeline_fit_predict_gives_similarities(tmp_path, capsys):
     assert "case-based: improved FPFH" in capsys.readouterr().out
 
 
-def test_outputs_are_never_overwritten_without_asking(tmp_path, capsys):
-    _labelled_folder(tmp_path / "seg", n_per_class=3)
+def test_outputs_are_never_overwritten_without_asking(
+    tmp_path, capsys, labelled_folder
+):
+    labelled_folder(tmp_path / "seg", n_per_class=3)
     model = tmp_path / "model.joblib"
     model.write_text("precious")
     with pytest.raises(SystemExit, match="exists; pass --overwrite"):
@@ -163,15 +152,17 @@ def test_outputs_are_never_overwritten_without_asking(tmp_path, capsys):
     assert npz.read_text() == "precious"
 
 
-def test_describe_unknown_descriptor(tmp_path):
-    _labelled_folder(tmp_path, n_per_class=1)
+def test_describe_unknown_descriptor(tmp_path, labelled_folder):
+    labelled_folder(tmp_path, n_per_class=1)
     with pytest.raises(SystemExit, match=r"unknown descriptor.*bogus"):
         main(["describe", str(tmp_path), "-o", str(tmp_path / "x.npz"),
               "--descriptors", "shape,bogus"])  # fmt: skip
 
 
-def test_predict_with_a_bad_model_file_is_a_clean_error(tmp_path, capsys):
-    _labelled_folder(tmp_path / "seg", n_per_class=1)
+def test_predict_with_a_bad_model_file_is_a_clean_error(
+    tmp_path, capsys, labelled_folder
+):
+    labelled_folder(tmp_path / "seg", n_per_class=1)
     bad = tmp_path / "model.joblib"
     bad.write_bytes(b"not a pickle")
     out = tmp_path / "p.csv"
@@ -184,27 +175,15 @@ def test_predict_with_a_bad_model_file_is_a_clean_error(tmp_path, capsys):
 # --- skpcd segment / skpcd identify -------------------------------------------
 
 
-def _scene_file(path, n_per_class=2, random_state=0):
-    """Synthetic urban objects on a terrain, written to ``path`` with an
-    intensity field; returns the points and the true object of each."""
-    from skpcd.datasets import make_urban_objects
-    from skpcd.segmentation import make_scene
-
-    clouds, labels = make_urban_objects(
-        n_per_class=n_per_class, random_state=random_state
-    )
-    points, truth = make_scene(clouds, gap=3.0, random_state=random_state)
-    write_point_cloud(path, points, fields={"intensity": np.arange(len(points))})
-    return points, truth, labels
-
-
-def test_segment_writes_one_file_per_segment_and_a_summary(tmp_path, capsys):
+def test_segment_writes_one_file_per_segment_and_a_summary(
+    tmp_path, capsys, scene_file
+):
     import csv
 
     from skpcd.io import read_point_cloud, read_segments
 
     scene = tmp_path / "scene.ply"
-    points, truth, _ = _scene_file(scene)
+    points, truth, _ = scene_file(scene)
     out = tmp_path / "segs"
     args = ["segment", str(scene), "-o", str(out), "--eps", "1.0", "--min-size", "30"]
     assert main([*args, "--keep-fields"]) == 0
@@ -235,16 +214,18 @@ def test_segment_writes_one_file_per_segment_and_a_summary(tmp_path, capsys):
     assert len(list(out.glob("*.xyz"))) == 10
 
 
-def test_identify_writes_the_labelled_scene(tmp_path, capsys):
+def test_identify_writes_the_labelled_scene(
+    tmp_path, capsys, labelled_folder, scene_file
+):
     import csv
 
     from skpcd.io import read_point_cloud
 
-    _labelled_folder(tmp_path / "train", n_per_class=8)
+    labelled_folder(tmp_path / "train", n_per_class=8)
     model = tmp_path / "model.joblib"
     assert main(["fit", str(tmp_path / "train"), "-o", str(model), "--quiet"]) == 0
     scene = tmp_path / "scene.pcd"
-    points, truth, labels = _scene_file(scene, random_state=3)
+    points, truth, labels = scene_file(scene, random_state=3)
     out = tmp_path / "labelled.ply"
     args = ["identify", str(scene), "--model", str(model), "-o", str(out)]
     assert main([*args, "--eps", "1.0", "--min-size", "30"]) == 0
@@ -270,11 +251,11 @@ def test_identify_writes_the_labelled_scene(tmp_path, capsys):
         main(args)
 
 
-def test_segment_eps_scale_sets_the_estimated_radius(tmp_path, capsys):
+def test_segment_eps_scale_sets_the_estimated_radius(tmp_path, capsys, scene_file):
     import re
 
     scene = tmp_path / "scene.ply"
-    _scene_file(scene)
+    scene_file(scene)
     eps = {}
     for scale in ("1", "2.5"):
         out = tmp_path / f"segs{scale}"
@@ -303,10 +284,12 @@ def test_segment_and_identify_bad_inputs(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("command", ["fit", "describe", "predict"])
-def test_output_folder_problems_are_found_before_any_work(tmp_path, command):
+def test_output_folder_problems_are_found_before_any_work(
+    tmp_path, command, labelled_folder
+):
     # before: a FileNotFoundError/IsADirectoryError after fitting or computing
     # the descriptors (describe also left a .tmp.npz behind)
-    _labelled_folder(tmp_path / "seg", n_per_class=1)
+    labelled_folder(tmp_path / "seg", n_per_class=1)
     model = tmp_path / "model.joblib"
     model.write_text("never read")
     first = {"predict": [str(model)]}.get(command, [])
@@ -324,8 +307,8 @@ def test_output_folder_problems_are_found_before_any_work(tmp_path, command):
     assert not list((tmp_path / "seg").glob(".*"))
 
 
-def test_predict_never_writes_over_its_model(tmp_path):
-    _labelled_folder(tmp_path / "seg", n_per_class=1)
+def test_predict_never_writes_over_its_model(tmp_path, labelled_folder):
+    labelled_folder(tmp_path / "seg", n_per_class=1)
     model = tmp_path / "model.joblib"
     model.write_text("precious")
     with pytest.raises(SystemExit, match="is an input file"):
@@ -334,12 +317,12 @@ def test_predict_never_writes_over_its_model(tmp_path):
     assert model.read_text() == "precious"
 
 
-def test_predict_with_a_model_that_is_not_a_cloud_classifier(tmp_path):
+def test_predict_with_a_model_that_is_not_a_cloud_classifier(tmp_path, labelled_folder):
     from sklearn.linear_model import LogisticRegression
 
     from skpcd.io import save_model
 
-    _labelled_folder(tmp_path / "seg", n_per_class=1)
+    labelled_folder(tmp_path / "seg", n_per_class=1)
     out = tmp_path / "p.csv"
     # a saved object without predict: was AttributeError: 'dict' object ...
     save_model({"a": 1}, tmp_path / "dict.joblib")
@@ -357,8 +340,8 @@ def test_predict_with_a_model_that_is_not_a_cloud_classifier(tmp_path):
     assert not out.exists()
 
 
-def test_describe_bad_descriptor_options(tmp_path):
-    _labelled_folder(tmp_path, n_per_class=1)
+def test_describe_bad_descriptor_options(tmp_path, labelled_folder):
+    labelled_folder(tmp_path, n_per_class=1)
     out = tmp_path / "d.npz"
     # was: an .npz holding the names only
     with pytest.raises(SystemExit, match="no descriptor asked for"):
@@ -412,11 +395,13 @@ def test_one_class_is_refused_where_it_means_nothing(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("command", ["fit", "describe", "predict"])
-def test_outputs_never_replace_the_inputs_even_with_overwrite(tmp_path, command):
+def test_outputs_never_replace_the_inputs_even_with_overwrite(
+    tmp_path, command, labelled_folder
+):
     # was: labels.csv replaced by the model (fit), a segment file replaced
     # by the predictions or the descriptors
     seg = tmp_path / "seg"
-    _labelled_folder(seg, n_per_class=1)
+    labelled_folder(seg, n_per_class=1)
     model = tmp_path / "model.joblib"
     model.write_text("never read")
     first = [str(model)] if command == "predict" else []
@@ -438,9 +423,11 @@ def test_outputs_never_replace_the_inputs_even_with_overwrite(tmp_path, command)
 
 
 @pytest.mark.parametrize("command", ["fit", "describe", "predict", "evaluate"])
-def test_an_unreadable_segment_is_a_clean_error_naming_it(tmp_path, capsys, command):
+def test_an_unreadable_segment_is_a_clean_error_naming_it(
+    tmp_path, capsys, command, labelled_folder
+):
     seg = tmp_path / "seg"
-    _labelled_folder(seg, n_per_class=1)
+    labelled_folder(seg, n_per_class=1)
     (seg / "002.xyz").write_text("1 2\n3 4\n")  # two columns: not a cloud
     model = tmp_path / "model.joblib"
     if command == "predict":
@@ -499,11 +486,11 @@ def _tree_bytes(folder):
 
 
 @pytest.mark.parametrize("ext", [".las", ".ply"])
-def test_segment_tiled_writes_the_untiled_files(tmp_path, capsys, ext):
+def test_segment_tiled_writes_the_untiled_files(tmp_path, capsys, ext, scene_file):
     if ext == ".las":
         pytest.importorskip("laspy")
     scene = tmp_path / f"scene{ext}"
-    _scene_file(scene, random_state=2)
+    scene_file(scene, random_state=2)
     args = ["segment", str(scene), "--eps", "1.0", "--min-size", "30", "--quiet"]
     assert main([*args, "-o", str(tmp_path / "whole"), "--keep-fields"]) == 0
     tiled = [*args, "-o", str(tmp_path / "tiles"), "--keep-fields"]
@@ -535,15 +522,17 @@ def cluster():
         yield cluster.scheduler_address, client
 
 
-def test_scheduler_gives_the_local_outputs(tmp_path, cluster):
+def test_scheduler_gives_the_local_outputs(
+    tmp_path, cluster, labelled_folder, scene_file
+):
     from distributed import get_task_stream
 
     address, client = cluster
     scene = tmp_path / "scene.ply"
-    _scene_file(scene, random_state=2)
+    scene_file(scene, random_state=2)
     seg = ["segment", str(scene), "--eps", "1.0", "--min-size", "30", "--quiet"]
     seg += ["--tile-size", "12", "--ground", "none"]
-    _labelled_folder(tmp_path / "train", n_per_class=3)
+    labelled_folder(tmp_path / "train", n_per_class=3)
     outputs = {}
     for where, extra in (("local", []), ("dask", ["--scheduler", address])):
         out = tmp_path / where
@@ -573,11 +562,11 @@ def test_scheduler_gives_the_local_outputs(tmp_path, cluster):
     assert dask[2] == local[2]
 
 
-def test_scheduler_unreachable_or_missing(tmp_path, monkeypatch):
+def test_scheduler_unreachable_or_missing(tmp_path, monkeypatch, labelled_folder):
     import skpcd.cli._common
 
     pytest.importorskip("distributed")
-    _labelled_folder(tmp_path / "seg", n_per_class=1)
+    labelled_folder(tmp_path / "seg", n_per_class=1)
     monkeypatch.setattr(skpcd.cli._common, "SCHEDULER_TIMEOUT", 1)
     args = ["describe", str(tmp_path / "seg"), "-o", str(tmp_path / "d.npz")]
     with pytest.raises(SystemExit, match="cannot reach the Dask scheduler at tcp"):

@@ -13,34 +13,7 @@ import time
 import pytest
 
 from skpcd.cli import build_parser, main
-from skpcd.io import read_segments, write_point_cloud
-
-
-def _scene(path, n_per_class=2, random_state=0):
-    from skpcd.datasets import make_urban_objects
-    from skpcd.segmentation import make_scene
-
-    clouds, labels = make_urban_objects(
-        n_per_class=n_per_class, random_state=random_state
-    )
-    points, truth = make_scene(clouds, gap=3.0, random_state=random_state)
-    write_point_cloud(path, points)
-    return points, truth, labels
-
-
-def _labelled(folder, n_per_class=4, random_state=1):
-    from skpcd.datasets import make_urban_objects
-
-    clouds, labels = make_urban_objects(
-        n_per_class=n_per_class, random_state=random_state
-    )
-    folder.mkdir(exist_ok=True)
-    rows = ["file,label"]
-    for i, (c, y) in enumerate(zip(clouds, labels)):
-        write_point_cloud(folder / f"{i:03d}.xyz", c)
-        rows.append(f"{i:03d}.xyz,{y}")
-    (folder / "labels.csv").write_text("\n".join(rows))
-    return labels
+from skpcd.io import read_segments
 
 
 def _leftovers(folder):
@@ -55,11 +28,11 @@ def _segment_args(scene, out, *extra):
 # --- an output folder holds one run, whole ------------------------------------
 
 
-def test_overwrite_replaces_the_whole_run(tmp_path, capsys):
+def test_overwrite_replaces_the_whole_run(tmp_path, capsys, scene_file):
     # before: the 11 files of the second run were written over the 21 of the
     # first, and predict read 21 segments of both runs
     scene = tmp_path / "scene.ply"
-    _scene(scene)
+    scene_file(scene)
     out = tmp_path / "segs"
     args = _segment_args(scene, out, "--eps", "0.3", "--quiet")
     assert main([*args, "--min-size", "10"]) == 0  # 54 segments
@@ -75,9 +48,9 @@ def test_overwrite_replaces_the_whole_run(tmp_path, capsys):
     assert _leftovers(tmp_path) == []
 
 
-def test_overwrite_never_deletes_what_skpcd_did_not_write(tmp_path):
+def test_overwrite_never_deletes_what_skpcd_did_not_write(tmp_path, scene_file):
     scene = tmp_path / "scene.ply"
-    _scene(scene)
+    scene_file(scene)
     out = tmp_path / "segs"
     assert main(_segment_args(scene, out, "--eps", "1.0", "--quiet")) == 0
     (out / "labels.csv").write_text("segment_0000.ply,car\n")
@@ -89,12 +62,12 @@ def test_overwrite_never_deletes_what_skpcd_did_not_write(tmp_path):
     assert _leftovers(tmp_path) == []
 
 
-def test_segment_never_writes_over_its_scene(tmp_path):
+def test_segment_never_writes_over_its_scene(tmp_path, scene_file):
     # before: `segment dir/segment_0000.ply -o dir --overwrite` replaced the
     # 581,764-point scene by one of its segments
     scene = tmp_path / "segs" / "segment_0000.ply"
     scene.parent.mkdir()
-    _scene(scene)
+    scene_file(scene)
     before = scene.read_bytes()
     for out in (scene.parent, tmp_path):
         with pytest.raises(SystemExit, match="inside the output folder"):
@@ -103,10 +76,10 @@ def test_segment_never_writes_over_its_scene(tmp_path):
 
 
 @pytest.mark.parametrize("command", ["fit", "describe"])
-def test_no_command_writes_over_an_input_segment(tmp_path, command):
+def test_no_command_writes_over_an_input_segment(tmp_path, command, labelled_folder):
     # before: `fit segs -o segs/obj_000.ply --overwrite` replaced a segment
     # by a pickle
-    _labelled(tmp_path / "segs", n_per_class=1)
+    labelled_folder(tmp_path / "segs", n_per_class=1)
     name = "000.xyz" if command == "fit" else "labels.csv"
     target = tmp_path / "segs" / name
     before = target.read_bytes()
@@ -116,12 +89,14 @@ def test_no_command_writes_over_an_input_segment(tmp_path, command):
     assert target.read_bytes() == before
 
 
-def test_predict_refuses_a_folder_of_an_interrupted_or_mixed_run(tmp_path):
+def test_predict_refuses_a_folder_of_an_interrupted_or_mixed_run(
+    tmp_path, labelled_folder, scene_file
+):
     # before: an interrupted segment left segment files without
     # segments.csv, and predict labelled them ("predicted 200 segments")
     scene = tmp_path / "scene.ply"
-    _scene(scene)
-    _labelled(tmp_path / "train")
+    scene_file(scene)
+    labelled_folder(tmp_path / "train", n_per_class=4)
     model = tmp_path / "m.joblib"
     assert main(["fit", str(tmp_path / "train"), "-o", str(model), "--quiet"]) == 0
     out = tmp_path / "segs"
@@ -159,9 +134,11 @@ def _interrupt_on_write(monkeypatch, after, how):
 
 
 @pytest.mark.parametrize("how", ["SIGINT", "SIGTERM"])
-def test_an_interrupted_segment_leaves_no_output(tmp_path, capsys, monkeypatch, how):
+def test_an_interrupted_segment_leaves_no_output(
+    tmp_path, capsys, monkeypatch, how, scene_file
+):
     scene = tmp_path / "scene.ply"
-    _scene(scene)
+    scene_file(scene)
     out = tmp_path / "segs"
     _interrupt_on_write(monkeypatch, 4, how)
     status = main(_segment_args(scene, out, "--eps", "1.0", "--quiet"))
@@ -171,9 +148,11 @@ def test_an_interrupted_segment_leaves_no_output(tmp_path, capsys, monkeypatch, 
     assert not out.exists() and _leftovers(tmp_path) == []
 
 
-def test_an_interrupted_overwrite_keeps_the_previous_run(tmp_path, monkeypatch):
+def test_an_interrupted_overwrite_keeps_the_previous_run(
+    tmp_path, monkeypatch, scene_file
+):
     scene = tmp_path / "scene.ply"
-    _scene(scene)
+    scene_file(scene)
     out = tmp_path / "segs"
     assert main(_segment_args(scene, out, "--eps", "1.0", "--quiet")) == 0
     before = {p.name: p.read_bytes() for p in out.iterdir()}
@@ -184,10 +163,10 @@ def test_an_interrupted_overwrite_keeps_the_previous_run(tmp_path, monkeypatch):
     assert _leftovers(tmp_path) == []
 
 
-def test_ctrl_c_in_a_real_process_is_one_line(tmp_path):
+def test_ctrl_c_in_a_real_process_is_one_line(tmp_path, scene_file):
     """A real SIGINT from outside, while the segments are being written."""
     scene = tmp_path / "scene.ply"
-    _scene(scene)
+    scene_file(scene)
     out = tmp_path / "segs"
     script = textwrap.dedent(
         f"""
@@ -235,12 +214,14 @@ def _run_with_file_size_limit(argv, limit):
     )
 
 
-def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path):
+def test_a_full_disk_is_one_line_and_leaves_nothing(
+    tmp_path, labelled_folder, scene_file
+):
     # before: a raw OSError traceback, and predict left a 0-byte CSV that
     # blocked the rerun
     scene = tmp_path / "scene.ply"
-    _scene(scene)
-    _labelled(tmp_path / "train")
+    scene_file(scene)
+    labelled_folder(tmp_path / "train", n_per_class=4)
     model = tmp_path / "m.joblib"
     assert main(["fit", str(tmp_path / "train"), "-o", str(model), "--quiet"]) == 0
     out = tmp_path / "segs"
@@ -272,7 +253,7 @@ def test_a_misspelled_folder_is_said_not_to_exist(tmp_path, command):
         main([command, *first, str(tmp_path / "segmnts"), *out])
 
 
-def test_a_stray_file_is_skipped_on_request_and_reported(tmp_path):
+def test_a_stray_file_is_skipped_on_request_and_reported(tmp_path, labelled_folder):
     # before: one notes.txt in the folder aborted predict
     script = textwrap.dedent(
         """
@@ -282,7 +263,7 @@ def test_a_stray_file_is_skipped_on_request_and_reported(tmp_path):
         """
     )
     folder = tmp_path / "segs"
-    _labelled(folder, n_per_class=2)
+    labelled_folder(folder, n_per_class=2)
     model = tmp_path / "m.joblib"
     assert main(["fit", str(folder), "-o", str(model), "--quiet"]) == 0
     (folder / "notes.txt").write_text("measured on a rainy day\n")
@@ -317,10 +298,10 @@ def test_commands_use_every_core_by_default():
         assert parser.parse_args(argv).n_jobs == -1
 
 
-def test_score_prints_accuracy_and_confusion_matrix(tmp_path, capsys):
+def test_score_prints_accuracy_and_confusion_matrix(tmp_path, capsys, labelled_folder):
     train, test = tmp_path / "train", tmp_path / "test"
-    _labelled(train, n_per_class=6, random_state=1)
-    labels = _labelled(test, n_per_class=3, random_state=2)
+    labelled_folder(train, n_per_class=6, random_state=1)
+    labels = labelled_folder(test, n_per_class=3, random_state=2)
     model = tmp_path / "m.joblib"
     assert main(["fit", str(train), "-o", str(model), "--quiet"]) == 0
     capsys.readouterr()
