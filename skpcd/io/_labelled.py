@@ -295,24 +295,26 @@ def _stream_las(source, output, arrays, class_names, score_name, keep_fields, ch
     has_ground = arrays["ground"] is not None
     with _las.open_checked(laspy, source) as (reader, n_points):
         _check_lengths(source, n_points, arrays)
-        header = reader.header.copy()
-        point_format = header.point_format
-        if score_name in point_format.standard_dimension_names:
+        standard = set(reader.header.point_format.standard_dimension_names)
+        if score_name in standard:
             raise ValueError(
                 f"score_name {score_name!r} is a standard LAS dimension; pick another"
             )
-        ours = _written(score_name, has_ground)
-        extra = list(point_format.extra_dimension_names)
-        drop = [n for n in extra if n in ours or not keep_fields]
-        if drop:
-            header.remove_extra_dims(drop)
-        header.add_extra_dims(_new_dims(laspy, score_name, has_ground))
-        vlrs = [v for v in header.vlrs if not _is_ours(v)]
-        header.vlrs = vlrs + _class_vlrs(
-            laspy, class_names, score_name, has_ground, existing=header.vlrs
-        )
-        evlrs = header.evlrs
-        kept = [n for n in reader.header.point_format.dtype().names if n not in drop]
+        with _las._decoding(source):  # laspy's parsing of the source's header
+            header = reader.header.copy()
+            ours = _written(score_name, has_ground)
+            extra = list(header.point_format.extra_dimension_names)
+            drop = [n for n in extra if n in ours or not keep_fields]
+            if drop:
+                header.remove_extra_dims(drop)
+            header.add_extra_dims(_new_dims(laspy, score_name, has_ground))
+            vlrs = [v for v in header.vlrs if not _is_ours(v)]
+            header.vlrs = vlrs + _class_vlrs(
+                laspy, class_names, score_name, has_ground, existing=header.vlrs
+            )
+            evlrs = header.evlrs
+            names = reader.header.point_format.dtype().names
+            kept = [n for n in names if n not in drop]
         n_classes = len(class_names)
         with atomic_path(output, overwrite=True) as tmp:
             compress = output.suffix.lower() == ".laz"

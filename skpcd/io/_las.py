@@ -22,6 +22,12 @@ shape ``(n, 3)`` becomes ``red green blue`` when its values fit uint16;
 ``normals`` becomes the extra dimensions ``normal_x normal_y normal_z``; any
 other field becomes extra bytes (``(n, c)`` fields as ``name_0 ...
 name_{c-1}``).
+
+Before laspy reads a file, its structure is read here with :mod:`struct` and
+checked against the file size (header, VLRs, EVLRs, point count, and for LAZ
+the laszip VLR, the chunk table and the chunk headers), and every failure of
+laspy or lazrs, lazrs's PanicException included, becomes a
+PointCloudFileError: see the user guide's "What the LAS reader checks".
 """
 
 import contextlib
@@ -55,6 +61,8 @@ def _problem(exc):
     problem = str(exc) or type(exc).__name__
     if "LazBackend" in problem:
         problem += " (pip install lazrs)"
+    if not isinstance(exc, Exception):  # lazrs's PanicException
+        problem = f"the LAZ decoder failed ({type(exc).__name__}: {problem})"
     return problem
 
 
@@ -70,93 +78,460 @@ def _check_file(path):
     return path
 
 
-def _open(laspy, path):
-    try:
-        return laspy.open(str(path))
-    except Exception as exc:
+# --- what is checked before laspy sees a file -----------------------------
+#
+# laspy trusts the header: it loops over the declared number of VLRs and
+# EVLRs, allocates the declared number of points and reads fewer without an
+# error, and lazrs allocates what the laszip VLR, the chunk table and the
+# chunk headers say (an allocation failure aborts the process) or panics
+# (PanicException, a BaseException). So the public header, the VLRs, the
+# EVLRs, the laszip VLR, the chunk table and the chunk headers of layered
+# LAZ are read here with struct and checked against the file size first.
+
+_BAD = "cannot read as LAS/LAZ: "
+_MIN_HEADER = {0: 227, 1: 227, 2: 227, 3: 235, 4: 375, 5: 393}
+_BASE_SIZE = (20, 28, 26, 34, 57, 63, 30, 36, 38, 59, 67)
+_VLR_HEADER = 54
+_EVLR_HEADER = 60
+_LASZIP = ("laszip encoded", 22204)
+# laszip item types and their sizes; BYTE (0) and BYTE14 (14) hold the
+# extra bytes, of any size
+_ITEM_SIZE = {6: 20, 7: 8, 8: 6, 9: 29, 10: 30, 11: 6, 12: 8, 13: 29}
+_ITEMS = {
+    0: (6,),
+    1: (6, 7),
+    2: (6, 8),
+    3: (6, 7, 8),
+    4: (6, 7, 9),
+    5: (6, 7, 8, 9),
+    6: (10,),
+    7: (10, 11),
+    8: (10, 12),
+    9: (10, 13),
+    10: (10, 12, 13),
+}
+# layers per item in a layered chunk (BYTE14: one per byte)
+_LAYERS = {10: 9, 11: 1, 12: 2, 13: 1}
+_VARIABLE_CHUNKS = 0xFFFFFFFF
+#: largest fixed LAZ chunk accepted (LASzip writes 50 000 points per chunk)
+MAX_CHUNK_POINTS = 2**24
+# the parallel decoder allocates chunk_size * record length up front
+_PARALLEL_CHUNK_BYTES = 2**27
+
+
+class _Layout(typing.NamedTuple):
+    """What the bytes of a LAS/LAZ file say, checked."""
+
+    size: int
+    minor: int
+    offset: int
+    point_format: int
+    record_length: int
+    n_points: int
+    compressed: bool
+    vlrs: list  # (user_id, record_id, data offset, data length)
+    evlrs: list
+    laz_backend: object  # None: laspy's choice
+
+
+def _text(raw):
+    return raw.split(b"\0")[0].decode("ascii", "replace")
+
+
+def _layout(path):
+    """Parse and check the header, VLRs and EVLRs of ``path``; no points."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        head = f.read(393)
+        if head[:4] != b"LASF":
+            raise PointCloudFileError(
+                path, _BAD + "not a LAS file (no 'LASF' signature)"
+            )
+        if size < 227:
+            raise PointCloudFileError(
+                path, _BAD + f"{size} bytes, too short for a LAS header (227 bytes)"
+            )
+        major, minor = head[24], head[25]
+        if major != 1 or minor not in _MIN_HEADER:
+            raise PointCloudFileError(
+                path, _BAD + f"unknown LAS version {major}.{minor}"
+            )
+        (header_size,) = struct.unpack_from("<H", head, 94)
+        offset, n_vlrs = struct.unpack_from("<II", head, 96)
+        format_id, record_length, legacy = struct.unpack_from("<BHI", head, 104)
+        if header_size < _MIN_HEADER[minor] or header_size > size:
+            raise PointCloudFileError(
+                path,
+                _BAD + f"the header size is {header_size} bytes (LAS 1.{minor} "
+                f"needs {_MIN_HEADER[minor]}; the file has {size})",
+            )
+        if not header_size <= offset <= size:
+            raise PointCloudFileError(
+                path,
+                _BAD + f"the point data starts at byte {offset}, outside the file "
+                f"after its header ({header_size} to {size})",
+            )
+        compressed = bool(format_id & 0x80) and not format_id & 0x40
+        point_format = format_id & 0x3F
+        if point_format >= len(_BASE_SIZE):
+            raise PointCloudFileError(
+                path, _BAD + f"unknown point format {point_format}"
+            )
+        if record_length < _BASE_SIZE[point_format]:
+            raise PointCloudFileError(
+                path,
+                _BAD + f"point records of {record_length} bytes, shorter than "
+                f"point format {point_format} needs ({_BASE_SIZE[point_format]})",
+            )
+        n_points = legacy
+        if minor >= 4:
+            start_evlr, n_evlrs, n_points = struct.unpack_from("<QIQ", head, 235)
+            if legacy not in (0, n_points):
+                raise PointCloudFileError(
+                    path,
+                    _BAD + f"the header's point counts disagree: {legacy} (legacy "
+                    f"field) and {n_points} (LAS 1.4 field)",
+                )
+        values = struct.unpack_from("<12d", head, 131)
+        scales, offsets = np.array(values[0:3]), np.array(values[3:6])
+        with np.errstate(all="ignore"):
+            extreme = np.abs(scales) * 2.0**31 + np.abs(offsets)
+        if not (np.isfinite(extreme).all() and np.all(scales != 0)):
+            raise PointCloudFileError(
+                path,
+                _BAD + f"invalid coordinate scales {scales.tolist()} or offsets "
+                f"{offsets.tolist()} (zero, NaN or infinite)",
+            )
+        vlrs = _walk(
+            f, path, header_size, n_vlrs, offset, _VLR_HEADER, "VLR", "the point data"
+        )
+        evlrs = []
+        if minor >= 4 and n_evlrs:
+            if start_evlr < offset:
+                raise PointCloudFileError(
+                    path,
+                    _BAD + f"the EVLRs start at byte {start_evlr}, before the point "
+                    f"data (byte {offset})",
+                )
+            evlrs = _walk(
+                f, path, start_evlr, n_evlrs, size, _EVLR_HEADER, "EVLR", "the file"
+            )
+            if not compressed and offset + n_points * record_length > start_evlr:
+                raise PointCloudFileError(
+                    path,
+                    _BAD + f"the {n_points} points declared (records of "
+                    f"{record_length} bytes from byte {offset}) run into the EVLRs "
+                    f"at byte {start_evlr}",
+                )
+    return _Layout(
+        size,
+        minor,
+        offset,
+        point_format,
+        record_length,
+        n_points,
+        compressed,
+        vlrs,
+        evlrs,
+        None,
+    )
+
+
+def _walk(f, path, start, count, end, header, what, limit):
+    """The (E)VLRs from byte ``start``: ``count`` of them, within ``end``."""
+    records = []
+    pos = start
+    length_format = "<H" if header == _VLR_HEADER else "<Q"
+    for k in range(count):
+        if pos + header > end:
+            raise PointCloudFileError(
+                path,
+                _BAD + f"the header declares {count} {what}s, but only {k} fit "
+                f"before the end of {limit} (byte {end})",
+            )
+        f.seek(pos)
+        raw = f.read(header)
+        (length,) = struct.unpack_from(length_format, raw, 20)
+        if pos + header + length > end:
+            raise PointCloudFileError(
+                path,
+                _BAD + f"{what} {k + 1} of {count} ({_text(raw[2:18])!r}, "
+                f"{length} bytes from byte {pos + header}) runs past the end of "
+                f"{limit} (byte {end})",
+            )
+        records.append((_text(raw[2:18]), raw[18] | raw[19] << 8, pos + header, length))
+        pos += header + length
+    return records
+
+
+def _check_points(path, layout):
+    """Check that the point data holds the declared points; the layout with
+    the LAZ backend to decode it with."""
+    n = layout.n_points
+    data = layout.offset
+    if not layout.compressed:
+        available = (layout.size - data) // layout.record_length
+        if n > available:
+            raise PointCloudFileError(
+                path,
+                _BAD + f"truncated: the header declares {n} points, the file holds "
+                f"{available} ({layout.size - data} bytes of {layout.record_length}"
+                f"-byte records from byte {data})",
+            )
+        return layout
+    laszip = [v for v in layout.vlrs if v[:2] == _LASZIP]
+    if not laszip:
         raise PointCloudFileError(
-            path, f"cannot read as LAS/LAZ: {_problem(exc)}"
+            path, _BAD + "compressed points but no laszip VLR (not a LAZ file)"
+        )
+    with open(path, "rb") as f:
+        f.seek(laszip[0][2])
+        record = f.read(laszip[0][3])
+        chunk_size, items = _check_laszip(path, layout, record)
+        if n == 0:
+            return layout
+        backend = _check_chunks(path, layout, f, record, chunk_size, items)
+    return layout._replace(laz_backend=backend)
+
+
+def _check_laszip(path, layout, record):
+    """Check the laszip VLR; returns (chunk_size, items)."""
+
+    def bad(problem):
+        return PointCloudFileError(path, _BAD + f"invalid laszip VLR: {problem}")
+
+    if len(record) < 34:
+        raise bad(f"{len(record)} bytes, fewer than 34")
+    compressor, coder, major, minor = struct.unpack_from("<HHBB", record, 0)
+    (chunk_size,) = struct.unpack_from("<I", record, 12)
+    (n_items,) = struct.unpack_from("<H", record, 32)
+    if compressor not in (2, 3):
+        what = "none" if compressor == 0 else "pointwise, not chunked"
+        raise bad(
+            f"compressor {compressor} ({what}); chunked (2) or layered (3) expected"
+            if compressor < 2
+            else f"unknown compressor {compressor}"
+        )
+    if coder != 0:
+        raise bad(f"unknown coder {coder} (0, arithmetic, expected)")
+    if not 1 <= major <= 3:
+        raise bad(f"unknown LASzip version {major}.{minor}")
+    if chunk_size == 0 or (
+        chunk_size != _VARIABLE_CHUNKS and chunk_size > MAX_CHUNK_POINTS
+    ):
+        raise bad(
+            f"chunk size {chunk_size} points (1 to {MAX_CHUNK_POINTS}, or "
+            f"{_VARIABLE_CHUNKS} for variable chunks)"
+        )
+    if not 1 <= n_items <= 10 or len(record) < 34 + 6 * n_items:
+        raise bad(f"{n_items} items in {len(record)} bytes")
+    items = [struct.unpack_from("<HHH", record, 34 + 6 * k) for k in range(n_items)]
+    fmt = layout.point_format
+    expected = list(_ITEMS[fmt])
+    n_extra = layout.record_length - _BASE_SIZE[fmt]
+    if n_extra:
+        expected.append(14 if fmt >= 6 else 0)
+    types = [t for t, _, _ in items]
+    if types != expected:
+        raise bad(f"items {types} do not match point format {fmt} ({expected})")
+    for item_type, item_size, _ in items:
+        if item_size != _ITEM_SIZE.get(item_type, n_extra):
+            raise bad(
+                f"item {item_type} of {item_size} bytes (expected "
+                f"{_ITEM_SIZE.get(item_type, n_extra)})"
+            )
+    if compressor == 3 and fmt < 6:
+        raise bad(f"layered compression (3) of point format {fmt}")
+    return chunk_size, items
+
+
+def _check_chunks(path, layout, f, record, chunk_size, items):
+    """Check the chunk table (and the chunk headers of layered LAZ) against
+    the file; returns the laspy backend to decode with."""
+    laspy = _laspy()
+    n, data, size = layout.n_points, layout.offset, layout.size
+    first = data + 8  # the chunks follow the offset of the chunk table
+    f.seek(data)
+    raw = f.read(8)
+    table = struct.unpack("<q", raw)[0] if len(raw) == 8 else None
+    where = f"at byte {table}"
+    if table == -1:  # written at the end: the last 8 bytes point to it
+        f.seek(max(size - 8, 0))
+        table = struct.unpack("<q", f.read(8))[0]
+        where = f"at byte {table} (given at the end of the file)"
+    layered = record[0] == 3
+    n_layers = [_LAYERS.get(t, s) for t, s, _ in items]
+    if table is None or not first <= table <= size - 8:
+        held = ""
+        if layered and table is not None and table > size - 8:
+            n_held, n_chunks = _complete_layered(f, layout, first, size, n_layers)
+            held = f", the file holds {n_held} (its first {n_chunks} complete chunks)"
+        raise PointCloudFileError(
+            path,
+            _BAD + f"truncated or corrupt LAZ: the header declares {n} points"
+            f"{held}; the chunk table that indexes them, {where}, is outside the "
+            f"point data (bytes {first} to {size})",
+        )
+    f.seek(table)
+    version, n_chunks = struct.unpack("<II", f.read(8))
+    # a chunk holds at least one raw point; lazrs ends variable-size chunks
+    # with an empty one
+    most = max((table - first) // layout.record_length, 0) + 1
+    if version != 0 or not 1 <= n_chunks <= most:
+        raise PointCloudFileError(
+            path,
+            _BAD + f"corrupt LAZ chunk table {where}: version {version}, "
+            f"{n_chunks} chunks (1 to {most} fit in the point data)",
+        )
+    try:
+        import lazrs
+    except ImportError:
+        return None  # laspy reports the missing backend
+    f.seek(data)
+    with _decoding(path):
+        chunks = lazrs.read_chunk_table(f, lazrs.LazVlr(record))
+    variable = chunk_size == _VARIABLE_CHUNKS
+    n_indexed = sum(c for c, _ in chunks) if variable else len(chunks) * chunk_size
+    n_bytes = sum(b for _, b in chunks)
+    if len(chunks) != n_chunks or n_bytes > table - first:
+        raise PointCloudFileError(
+            path,
+            _BAD + f"corrupt LAZ chunk table {where}: {len(chunks)} chunks of "
+            f"{n_bytes} bytes, the point data has {table - first}",
+        )
+    if n_indexed < n:
+        raise PointCloudFileError(
+            path,
+            _BAD + f"truncated or corrupt LAZ: the header declares {n} points, the "
+            f"chunk table indexes {n_indexed} ({len(chunks)} chunks)",
+        )
+    if layered:
+        pos = first
+        for k, (count, n_bytes) in enumerate(chunks):
+            if variable and count == n_bytes == 0:
+                continue
+            most = count if variable else chunk_size
+            problem = _layered_chunk(f, layout, pos, pos + n_bytes, n_layers, most)
+            if problem:
+                raise PointCloudFileError(
+                    path, _BAD + f"corrupt LAZ chunk {k + 1} at byte {pos}: {problem}"
+                )
+            pos += n_bytes
+    # the parallel decoder pays off from two chunks on (and starts threads)
+    parallel = (
+        not variable
+        and len(chunks) > 1
+        and chunk_size * layout.record_length <= _PARALLEL_CHUNK_BYTES
+    )
+    backend = laspy.LazBackend.LazrsParallel if parallel else laspy.LazBackend.Lazrs
+    return backend if backend.is_available() else None
+
+
+def _layered_chunk(f, layout, start, end, n_layers, most):
+    """What is wrong with the layered chunk at ``start:end`` (or None): the
+    first point raw, the point count, then the size of every layer."""
+    head = layout.record_length + 4 + 4 * sum(n_layers)
+    if start + head > end:
+        return f"{end - start} bytes, fewer than its header ({head})"
+    f.seek(start + layout.record_length)
+    raw = f.read(head - layout.record_length)
+    count, *sizes = struct.unpack(f"<{len(raw) // 4}I", raw)
+    if not 1 <= count <= most:
+        return f"{count} points (1 to {most} expected)"
+    if start + head + sum(sizes) > end:
+        return f"its layers take {sum(sizes)} bytes, the chunk has {end - start - head}"
+    return None
+
+
+def _complete_layered(f, layout, start, size, n_layers):
+    """Points and number of the layered chunks complete in a truncated file,
+    found by walking the chunk headers."""
+    head = layout.record_length + 4 + 4 * sum(n_layers)
+    pos, n_points, n_chunks = start, 0, 0
+    while pos + head <= size:
+        f.seek(pos + layout.record_length)
+        raw = f.read(head - layout.record_length)
+        count, *sizes = struct.unpack(f"<{len(raw) // 4}I", raw)
+        end = pos + head + sum(sizes)
+        if end > size or n_points + count > layout.n_points:
+            break
+        n_points += count
+        n_chunks += 1
+        pos = end
+    return n_points, n_chunks
+
+
+def _checked(path, *, points=True):
+    """The checked layout of a LAS/LAZ file (its point data too)."""
+    layout = _layout(path)
+    return _check_points(path, layout) if points else layout
+
+
+@contextlib.contextmanager
+def _decoding(path):
+    """laspy's and lazrs's failures as PointCloudFileError: lazrs's
+    PanicException is a BaseException, so everything but an interrupt or an
+    exit is caught."""
+    try:
+        yield
+    except (PointCloudFileError, KeyboardInterrupt, SystemExit, GeneratorExit):
+        raise
+    except MemoryError as exc:
+        raise PointCloudFileError(
+            path, _BAD + "not enough memory to decode the points"
         ) from exc
+    except BaseException as exc:
+        raise PointCloudFileError(path, _BAD + _problem(exc)) from exc
+
+
+def _open(laspy, path, layout=None):
+    layout = _checked(path) if layout is None else layout
+    with _decoding(path):
+        return laspy.open(str(path), laz_backend=layout.laz_backend)
 
 
 @contextlib.contextmanager
 def open_checked(laspy, path):
-    """Open ``path`` with laspy; yields ``(reader, n_points)``."""
-    with _open(laspy, path) as reader:
-        yield reader, int(reader.header.point_count)
+    """Open a checked ``path`` with laspy; yields ``(reader, n_points)``."""
+    layout = _checked(path)
+    with _open(laspy, path, layout) as reader:
+        with _decoding(path):  # laspy's own parsing of the header and VLRs
+            reader.header.point_format.dtype()
+        yield reader, layout.n_points
 
 
 def checked_chunks(reader, path, chunk_size, n_points):
-    """The point records of ``reader``, ``chunk_size`` at a time, laspy's
-    errors turned into PointCloudFileError, and fewer points than the header
+    """The point records of ``reader``, ``chunk_size`` at a time, failures
+    turned into PointCloudFileError, and fewer points than the header
     declares an error too."""
     chunks = reader.chunk_iterator(chunk_size)
     n_read = 0
-    while True:
-        try:
-            chunk = next(chunks)
-        except StopIteration:
-            break
-        except Exception as exc:
-            raise PointCloudFileError(
-                path, f"cannot read as LAS/LAZ: {_problem(exc)}"
-            ) from exc
-        if len(chunk) == 0:
+    while n_read < n_points:
+        with _decoding(path):
+            chunk = next(chunks, None)
+        if chunk is None or len(chunk) == 0:
             break
         n_read += len(chunk)
         yield chunk
     if n_read < n_points:
         raise PointCloudFileError(
             path,
-            f"cannot read as LAS/LAZ: truncated: the header declares {n_points} "
-            f"points, the file holds {n_read}",
+            _BAD + f"truncated: the header declares {n_points} points, "
+            f"{n_read} could be read",
         )
 
 
 def read_vlr_records(path):
     """Every VLR and EVLR of a LAS/LAZ file as ``(user_id, record_id, data)``,
-    read from the bytes (not through laspy, which rewrites known records)."""
+    read from the bytes (laspy rewrites the records it knows)."""
     path = _check_file(path)
-    size = path.stat().st_size
+    layout = _checked(path, points=False)
+    records = []
     with open(path, "rb") as f:
-        head = f.read(375)
-        if len(head) < 227 or head[:4] != b"LASF":
-            raise PointCloudFileError(path, "cannot read as LAS/LAZ: not a LAS file")
-        minor = head[25]
-        (header_size,) = struct.unpack_from("<H", head, 94)
-        offset, n_vlrs = struct.unpack_from("<II", head, 96)
-        records = []
-        pos = header_size
-        for _ in range(n_vlrs):
-            if pos + 54 > min(offset, size):
-                break
-            f.seek(pos)
-            raw = f.read(54)
-            (length,) = struct.unpack_from("<H", raw, 20)
-            if pos + 54 + length > size:
-                break
-            records.append((_text(raw[2:18]), raw[18] | raw[19] << 8, f.read(length)))
-            pos += 54 + length
-        if minor >= 4 and len(head) >= 247:
-            start, n_evlrs = struct.unpack_from("<QI", head, 235)
-            pos = start
-            for _ in range(n_evlrs if start else 0):
-                if pos + 60 > size:
-                    break
-                f.seek(pos)
-                raw = f.read(60)
-                (length,) = struct.unpack_from("<Q", raw, 20)
-                if pos + 60 + length > size:
-                    break
-                records.append(
-                    (_text(raw[2:18]), raw[18] | raw[19] << 8, f.read(length))
-                )
-                pos += 60 + length
+        for user_id, record_id, start, length in layout.vlrs + layout.evlrs:
+            f.seek(start)
+            records.append((user_id, record_id, f.read(length)))
     return records
-
-
-def _text(raw):
-    return raw.split(b"\0")[0].decode("ascii", "replace")
 
 
 class LasExtent(typing.NamedTuple):
@@ -184,9 +559,10 @@ class LasExtent(typing.NamedTuple):
 def read_las_extent(path):
     """Point count and bounding box of a LAS/LAZ file, from its header only.
 
-    Nothing but the header is read, so this is instant whatever the size of
-    the file. The bounds are those the writer stored (laspy and most tools
-    store the exact extent of the points).
+    Nothing but the header and the structure of the file (VLRs, the size of
+    the point data, for LAZ the chunk table) is read, so this is instant
+    whatever the size of the file. The bounds are those the writer stored
+    (laspy and most tools store the exact extent of the points).
 
     Parameters
     ----------
@@ -205,7 +581,9 @@ def read_las_extent(path):
     MissingFileError
         If the file does not exist.
     PointCloudFileError
-        If the file is not a readable LAS/LAZ file.
+        If the file is not a readable LAS/LAZ file, or does not hold the
+        points its header declares (see the user guide's "What the LAS
+        reader checks").
 
     See Also
     --------
@@ -223,10 +601,10 @@ def read_las_extent(path):
     """
     laspy = _laspy()
     path = _check_file(path)
-    with _open(laspy, path) as reader:
+    with _decoding(path), open_checked(laspy, path) as (reader, n_points):
         header = reader.header
         return LasExtent(
-            int(header.point_count),
+            n_points,
             np.array(header.mins, dtype=np.float64),
             np.array(header.maxs, dtype=np.float64),
             tuple(header.point_format.dimension_names),
@@ -240,6 +618,10 @@ def iter_points(path, *, chunk_size=1_000_000, fields=None):
     larger than memory can be streamed: concatenated, the chunks are exactly
     what :func:`read_point_cloud` returns for the whole file (with
     ``nonfinite="keep"``; LAS coordinates are always finite).
+
+    The structure of the file is checked when this is called, before the
+    first chunk: a file that does not hold the points its header declares
+    (truncated, or a corrupt count) raises then, naming both counts.
 
     Parameters
     ----------
@@ -271,8 +653,8 @@ def iter_points(path, *, chunk_size=1_000_000, fields=None):
         If the file does not exist.
     PointCloudFileError
         If the file is not a readable LAS/LAZ file, is truncated, or lacks a
-        requested field. The error may come after some chunks were yielded
-        (a file truncated in the middle).
+        requested field. Compressed data that fails to decode in the middle
+        of a LAZ file raises after the chunks before it were yielded.
 
     See Also
     --------
@@ -298,11 +680,12 @@ def iter_points(path, *, chunk_size=1_000_000, fields=None):
         fields = [fields] if isinstance(fields, str) else list(fields)
     laspy = _laspy()
     path = _check_file(path)
-    return _iter_points(laspy, path, int(chunk_size), fields)
+    layout = _checked(path)
+    return _iter_points(laspy, path, layout, int(chunk_size), fields)
 
 
-def _iter_points(laspy, path, chunk_size, fields):
-    with _open(laspy, path) as reader:
+def _iter_points(laspy, path, layout, chunk_size, fields):
+    with _decoding(path), _open(laspy, path, layout) as reader:
         available = set(reader.header.point_format.dimension_names)
         missing = [f for f in fields or () if f not in available or f in "XYZ"]
         if missing:
@@ -311,18 +694,7 @@ def _iter_points(laspy, path, chunk_size, fields):
                 f"no field {missing[0]!r}; the file has: "
                 + ", ".join(n for n in available if n not in ("X", "Y", "Z")),
             )
-        chunks = reader.chunk_iterator(chunk_size)
-        while True:
-            try:
-                chunk = next(chunks)
-            except StopIteration:
-                return
-            except Exception as exc:
-                raise PointCloudFileError(
-                    path, f"cannot read as LAS/LAZ: {_problem(exc)}"
-                ) from exc
-            if len(chunk) == 0:
-                return
+        for chunk in checked_chunks(reader, path, chunk_size, layout.n_points):
             xyz = np.empty((len(chunk), 3))
             for j, c in enumerate("xyz"):
                 xyz[:, j] = chunk[c]
@@ -330,6 +702,32 @@ def _iter_points(laspy, path, chunk_size, fields):
                 yield xyz
             else:
                 yield xyz, {f: np.array(chunk[f]) for f in fields}
+
+
+def _read_records(laspy, path, layout, reader):
+    """Every point record of ``reader`` in one array. The points are decoded
+    a million at a time into an array of the declared size, allocated up
+    front when the file can hold that much (always for LAS: the size was
+    checked; for LAZ up to 64 times the file size or 256 MiB); beyond that (a
+    LAZ file whose points compress better than any survey), the array grows
+    with the points decoded."""
+    n = layout.n_points
+    dtype = reader.header.point_format.dtype()
+    chunks = checked_chunks(reader, path, 1_000_000, n)
+    budget = max(2**28, 64 * layout.size)
+    if not layout.compressed or n * layout.record_length <= budget:
+        with _decoding(path):
+            array = np.empty(n, dtype)
+        start = 0
+        for chunk in chunks:
+            array[start : start + len(chunk)] = chunk.array
+            start += len(chunk)
+    else:
+        array = np.concatenate([chunk.array for chunk in chunks])
+    header = reader.header
+    return laspy.ScaleAwarePointRecord(
+        array, header.point_format, header.scales, header.offsets
+    )
 
 
 def read(path):
@@ -353,22 +751,21 @@ def read(path):
     ImportError
         If laspy is not installed.
     PointCloudFileError
-        If laspy cannot read the file (not a LAS file, truncated, no LAZ
-        backend...).
+        If the file is not a LAS file, its header, VLRs or LAZ structure are
+        corrupt, it holds fewer points than it declares, the points fail to
+        decode, or there is no LAZ backend.
     """
     laspy = _laspy()
-    try:
-        las = laspy.read(str(path))
-    except Exception as exc:
-        raise PointCloudFileError(
-            path, f"cannot read as LAS/LAZ: {_problem(exc)}"
-        ) from exc
-    fields = {c: np.asarray(getattr(las, c), dtype=np.float64) for c in "xyz"}
-    for name in las.point_format.dimension_names:
-        if name not in ("X", "Y", "Z"):
-            fields[name] = np.array(las[name])
+    path = Path(os.fspath(path))
+    layout = _checked(path)
+    with _decoding(path), _open(laspy, path, layout) as reader:
+        points = _read_records(laspy, path, layout, reader)
+        header = reader.header
+        fields = {c: np.asarray(points[c], dtype=np.float64) for c in "xyz"}
+        for name in points.point_format.dimension_names:
+            if name not in ("X", "Y", "Z"):
+                fields[name] = np.array(points[name])
     fields, grouped = _group(fields)
-    header = las.header
     info = {
         "version": str(header.version),
         "point_format": header.point_format.id,
