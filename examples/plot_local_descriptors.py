@@ -1,11 +1,15 @@
 """
-Local descriptors of real objects
-=================================
+Local descriptors of one object per class
+=========================================
 
 :class:`skpcd.features.FPFHTransformer` gives one 33-bin histogram per point. Averaged
 over an object, the histogram already tells flat roofs from the scattered surfaces of
-trees. Here: one DALES object per class, its points coloured by the dominant bin, and
-the mean histograms side by side.
+trees. Here: one object per class, the mean histograms side by side, and its points
+coloured by the dominant bin.
+
+The objects are DALES objects where ``SKPCD_DALES_DIR`` names their folder, and
+synthetic objects of :func:`skpcd.datasets.make_urban_objects` otherwise; the
+example prints, and the figures' titles say, which.
 """
 
 import matplotlib.pyplot as plt
@@ -14,8 +18,14 @@ import numpy as np
 from skpcd.datasets import load_dales_objects
 from skpcd.features import FPFHTransformer, PFHTransformer
 
-# The real DALES objects where SKPCD_DALES_DIR points to them, else synthetic stand-ins.
+# The DALES objects where SKPCD_DALES_DIR names their folder, else synthetic objects
+# of make_urban_objects (10 per class); ``objects.folder`` is None for the latter.
 objects = load_dales_objects(synthetic_if_missing=True, n_per_class=10)
+if objects.folder is not None:
+    data = f"DALES objects ({len(objects.data)} real aerial objects)"
+else:
+    data = f"synthetic make_urban_objects ({len(objects.data)}; DALES unavailable)"
+print(f"data: {data}")
 clouds, labels = objects.data, objects.target
 
 classes = sorted(set(labels.tolist()))
@@ -34,6 +44,7 @@ axes[0].set_title("mean FPFH (f1 | f2 | f3, 11 bins each)")
 axes[1].set_title("mean PFH (125 bins, f1 fastest)")
 axes[0].legend(ncol=len(classes))
 axes[1].set_xlabel("bin")
+fig.suptitle(f"one object per class: {data}")
 plt.show()
 
 # %%
@@ -48,4 +59,5 @@ for i, (name, cloud, h) in enumerate(zip(classes, picked, per_point)):
     ax.set_title(name)
     ax.set_axis_off()
     ax.set_box_aspect(np.ptp(xyz, axis=0) + 1e-9)
+fig.suptitle(data)
 plt.show()

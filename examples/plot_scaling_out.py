@@ -8,6 +8,10 @@ inside ``joblib.parallel_config(backend="dask")`` the batches run on the workers
 process. Here the cluster is a :class:`~distributed.LocalCluster` of two worker
 processes on this machine; pointed at a scheduler's address (``Client("tcp://...")``),
 the same code runs on many machines. See the user guide's :ref:`scaling` page.
+
+The clouds are 100 DALES objects where ``SKPCD_DALES_DIR`` names their folder, and
+100 synthetic objects of :func:`skpcd.datasets.make_urban_objects` otherwise (the
+output says which); the timings are those of the machine that built this page.
 """
 
 import logging
@@ -22,10 +26,16 @@ from skpcd.datasets import load_dales_objects
 from skpcd.features import PFHTransformer
 from skpcd.utils import batch_config
 
-# The real DALES objects where SKPCD_DALES_DIR points to them, else synthetic stand-ins.
+# The DALES objects where SKPCD_DALES_DIR names their folder, else synthetic objects
+# of make_urban_objects (20 per class); ``objects.folder`` is None for the latter.
 objects = load_dales_objects(synthetic_if_missing=True, n_per_class=20)
+if objects.folder is not None:
+    data = f"DALES objects ({len(objects.data)} real aerial objects)"
+else:
+    data = f"synthetic make_urban_objects ({len(objects.data)}; DALES unavailable)"
+print(f"data: {data}")
 clouds = objects.data[:100]
-print(f"{objects.source}: {len(clouds)} clouds, {sum(map(len, clouds))} points")
+print(f"{len(clouds)} of them, {sum(map(len, clouds))} points")
 
 pfh = PFHTransformer(n_neighbors=10, pooling="mean", n_jobs=2)
 
@@ -71,7 +81,7 @@ print("bit-identical:", np.array_equal(local, on_dask, equal_nan=True))
 # The batches, one bar per worker: when each ran (seconds from the first start).
 workers = sorted({t["worker"] for t in tasks})
 t0 = min((s["start"] for t in tasks for s in t["startstops"]), default=0.0)
-fig, ax = plt.subplots(figsize=(6, 1.6))
+fig, ax = plt.subplots(figsize=(6, 2.0))
 for row, worker in enumerate(workers):
     spans = [
         (s["start"] - t0, s["stop"] - s["start"])
@@ -84,6 +94,10 @@ for row, worker in enumerate(workers):
     ax.broken_barh(spans, (row - 0.4, 0.8), facecolors=colours[: len(spans)])
 ax.set_yticks(range(len(workers)), [f"worker {i}" for i in range(len(workers))])
 ax.set_xlabel("seconds")
-ax.set_title(f"{len(tasks)} batches of PFH on {len(workers)} Dask workers")
+ax.set_title(
+    f"{len(tasks)} batches of PFH on {len(workers)} Dask workers\n"
+    f"{len(clouds)} clouds, {data}",
+    fontsize="medium",
+)
 fig.tight_layout()
 plt.show()

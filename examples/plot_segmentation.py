@@ -9,8 +9,11 @@ mean k-th nearest-neighbour distance (Wang et al., 2019): a multiple (``eps_scal
 2.5 by default) of the distance at the curve's knee.
 
 To see how well it works we need a scene whose objects we know:
-:func:`~skpcd.segmentation.make_scene` places real DALES objects on a synthetic terrain,
-with gaps between them, holes in the ground and noise points.
+:func:`~skpcd.segmentation.make_scene` places segmented objects on a synthetic terrain,
+with gaps between them, holes in the ground and noise points. The objects are DALES
+objects where ``SKPCD_DALES_DIR`` names their folder, and synthetic objects of
+:func:`skpcd.datasets.make_urban_objects` otherwise; the output and the figures'
+titles say which.
 """
 
 import matplotlib.pyplot as plt
@@ -20,9 +23,15 @@ from sklearn.metrics import adjusted_rand_score
 from skpcd.datasets import load_dales_objects
 from skpcd.segmentation import AutoEpsDBSCAN, make_scene, plot_eps_curve, segment_scene
 
-# The real DALES objects where SKPCD_DALES_DIR points to them, else synthetic stand-ins.
+# The DALES objects where SKPCD_DALES_DIR names their folder, else synthetic objects
+# of make_urban_objects (40 per class); ``objects.folder`` is None for the latter.
 objects = load_dales_objects(synthetic_if_missing=True, n_per_class=40)
-clouds, labels, source = objects.data, objects.target, objects.source
+if objects.folder is not None:
+    data = f"DALES objects ({len(objects.data)} real aerial objects)"
+else:
+    data = f"synthetic make_urban_objects ({len(objects.data)}; DALES unavailable)"
+print(f"data: {data}")
+clouds, labels = objects.data, objects.target
 
 rng = np.random.default_rng(0)
 pick = np.concatenate(
@@ -32,7 +41,7 @@ pick = np.concatenate(
     ]
 )
 points, truth = make_scene([clouds[i] for i in pick], gap=3.0, random_state=0)
-print(f"{source}: {len(pick)} objects, a scene of {len(points)} points")
+print(f"{len(pick)} of them in a scene of {len(points)} points")
 
 # %%
 # Segment the scene
@@ -41,10 +50,10 @@ print(f"{source}: {len(pick)} objects, a scene of {len(points)} points")
 # itself as the radius (``eps_scale=1``). The knee distance measures the spacing of
 # the points on the surfaces; the sparser parts of real objects (pole arms, fence
 # gaps, thin canopy) are wider apart, and at that radius they break off. The default,
-# 2.5 times the knee distance (chosen by cross-validation on other DALES objects, see
-# the User Guide), bridges them and stays below the 3 m gaps between objects. The
-# adjusted Rand index compares the segments with the objects over the object points
-# (the lowest of which the ground filter takes as ground).
+# 2.5 times the knee distance (chosen by cross-validation on scenes of DALES objects,
+# see :ref:`segmentation`), bridges them and stays below the 3 m gaps between
+# objects. The adjusted Rand index compares the segments with the objects over the
+# object points (the lowest of which the ground filter takes as ground).
 auto = segment_scene(points, min_cluster_size=30)
 scale = AutoEpsDBSCAN().eps_scale
 knee = segment_scene(points, eps=auto.eps / scale, min_cluster_size=30)
@@ -82,6 +91,7 @@ fig, axes = plt.subplots(1, 2, figsize=(11, 5.5), sharey=True)
 draw(axes[0], knee, f"knee distance = {knee.eps:.2f} m: {knee.n_segments} segments")
 draw(axes[1], auto, f"automatic eps = {auto.eps:.2f} m: {auto.n_segments} segments")
 axes[0].set_ylabel("y (m)")
+fig.suptitle(f"a scene of {len(pick)} of the {data}")
 fig.tight_layout()
 plt.show()
 
@@ -93,6 +103,7 @@ plt.show()
 # measures how far apart the points of a surface are, so it follows the sampling
 # density of the scan.
 db = AutoEpsDBSCAN(random_state=0).fit(points[~auto.ground])
-plot_eps_curve(db)
+ax = plot_eps_curve(db)
+ax.set_title(f"the scene's non-ground points: {data}", fontsize="medium")
 plt.tight_layout()
 plt.show()
