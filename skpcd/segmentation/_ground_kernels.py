@@ -1,10 +1,17 @@
 """numba kernels of the ground filter: the minimum-z raster and the lookup
 of a raster at the points, in one pass over the points each (no
-per-point temporaries)."""
+per-point temporaries); the low-noise test and the two interpolations of
+the raster, each cell from the cells within a fixed distance of it."""
 
 import math
 
+import numpy as np
 from numba import njit
+
+# The 8 neighbour directions: edge neighbours first, then corners; each
+# pair (2 k, 2 k + 1) opposite.
+_DR = (-1, 1, 0, 0, -1, 1, -1, 1)
+_DC = (0, 0, -1, 1, -1, 1, 1, -1)
 
 
 @njit(cache=True, nogil=True)
@@ -49,3 +56,188 @@ def bilinear(xyz, x0, y0, cell, nx, ny, c0, r0, grid, out):
         top = grid[r, c] * (1.0 - fu) + grid[r, c1] * fu
         bottom = grid[r1, c] * (1.0 - fu) + grid[r1, c1] * fu
         out[i] = top * (1.0 - fv) + bottom * fv
+
+
+# Each kernel below computes every cell of a raster from the cells within a
+# fixed distance of it, visiting them in a fixed order: a window of the
+# raster gives the cells of the whole raster bit for bit wherever that
+# neighbourhood lies in the window (the tiled ground filter relies on it).
+# Neighbours beyond the array are skipped (or, for the median, clamped to the
+# edge as ``scipy.ndimage``'s ``mode="nearest"`` does).
+
+
+@njit(cache=True, nogil=True)
+def _nearest_known(zmin, known, r, c):
+    """zmin at (r, c) if known, else at the nearest known cell of the 3x3
+    around it (edge neighbours first, then corners, in a fixed order); NaN
+    when there is none."""
+    if known[r, c]:
+        return zmin[r, c]
+    ny, nx = zmin.shape
+    for k in range(8):
+        r2, c2 = r + _DR[k], c + _DC[k]
+        if 0 <= r2 < ny and 0 <= c2 < nx and known[r2, c2]:
+            return zmin[r2, c2]
+    return math.nan
+
+
+@njit(cache=True, nogil=True)
+def drop_low_noise(zmin, known, depth, out):
+    """``out``: ``known`` without the cells more than ``depth`` below the
+    median of their 8 neighbours, an empty neighbour counting as its nearest
+    known cell (always within one cell: the centre is known), a neighbour
+    beyond the edge as the edge cell next to it. The median of the 8 is the
+    upper one (the 5th smallest, as ``scipy.ndimage.median_filter``)."""
+    ny, nx = zmin.shape
+    ring = np.empty(8)
+    for r in range(ny):
+        for c in range(nx):
+            if not known[r, c]:
+                out[r, c] = False
+                continue
+            m = 0
+            for dr in (-1, 0, 1):
+                for dc in (-1, 0, 1):
+                    if dr == 0 and dc == 0:
+                        continue
+                    r2 = min(max(r + dr, 0), ny - 1)
+                    c2 = min(max(c + dc, 0), nx - 1)
+                    ring[m] = _nearest_known(zmin, known, r2, c2)
+                    m += 1
+            ring.sort()
+            out[r, c] = not (zmin[r, c] < ring[4] - depth)
+
+
+@njit(cache=True, nogil=True)
+def fill_surface(zmin, known, radius, out):
+    """``out``: ``zmin`` on the known cells; elsewhere the inverse-square-
+    distance mean of the known cells within ``radius`` cells (Euclidean),
+    +inf when there is none."""
+    ny, nx = zmin.shape
+    r2max = radius * radius
+    for r in range(ny):
+        for c in range(nx):
+            if known[r, c]:
+                out[r, c] = zmin[r, c]
+                continue
+            num, den = 0.0, 0.0
+            for dr in range(-radius, radius + 1):
+                rr = r + dr
+                if rr < 0 or rr >= ny:
+                    continue
+                for dc in range(-radius, radius + 1):
+                    cc = c + dc
+                    d2 = dr * dr + dc * dc
+                    if cc < 0 or cc >= nx or d2 > r2max or not known[rr, cc]:
+                        continue
+                    num += zmin[rr, cc] / d2
+                    den += 1.0 / d2
+            out[r, c] = num / den if den > 0 else math.inf
+
+
+@njit(cache=True, nogil=True)
+def _first_ground(ground, r, c, dr, dc, reach):
+    """Steps to the first ground cell from (r, c) along (dr, dc), at most
+    ``reach``; 0 when there is none."""
+    ny, nx = ground.shape
+    for s in range(1, reach + 1):
+        rr, cc = r + s * dr, c + s * dc
+        if rr < 0 or rr >= ny or cc < 0 or cc >= nx:
+            return 0
+        if ground[rr, cc]:
+            return s
+    return 0
+
+
+@njit(cache=True, nogil=True)
+def interpolate_terrain(zmin, ground, surface, near, reach, out):
+    """``out``: the terrain model. ``zmin`` on the ground cells; elsewhere,
+    along each of the 4 lines through the cell (row, column, diagonals), the
+    first ground cell within ``reach`` steps on either side: the lines with
+    both ends found give the linear interpolation between them, averaged
+    with weights ``1 / d_a + 1 / d_b`` (exact on a plane); without such a
+    line, the ends found on one side only, weighted ``1 / d``; with no
+    ground cell found, ``surface`` (the filled minimum surface: the lowest
+    points are the best terrain there is), NaN where that is not finite
+    either (no point within its fill radius). ``near`` flags the cells with
+    a point within ``reach`` cells (rows and columns): elsewhere no ground
+    cell can be found and the search is skipped."""
+    ny, nx = zmin.shape
+    for r in range(ny):
+        for c in range(nx):
+            if ground[r, c]:
+                out[r, c] = zmin[r, c]
+                continue
+            if not near[r, c]:
+                out[r, c] = surface[r, c] if math.isfinite(surface[r, c]) else math.nan
+                continue
+            num2, den2, num1, den1 = 0.0, 0.0, 0.0, 0.0
+            za, zb, wa, wb = 0.0, 0.0, 0.0, 0.0
+            for k in range(0, 8, 2):
+                step = 1.0 if k < 4 else math.sqrt(2.0)
+                sa = _first_ground(ground, r, c, _DR[k], _DC[k], reach)
+                sb = _first_ground(ground, r, c, _DR[k + 1], _DC[k + 1], reach)
+                if sa > 0:
+                    za = zmin[r + sa * _DR[k], c + sa * _DC[k]]
+                    wa = 1.0 / (sa * step)
+                if sb > 0:
+                    zb = zmin[r + sb * _DR[k + 1], c + sb * _DC[k + 1]]
+                    wb = 1.0 / (sb * step)
+                if sa > 0 and sb > 0:
+                    num2 += wa * za + wb * zb
+                    den2 += wa + wb
+                elif sa > 0:
+                    num1 += wa * za
+                    den1 += wa
+                elif sb > 0:
+                    num1 += wb * zb
+                    den1 += wb
+            if den2 > 0:
+                out[r, c] = num2 / den2
+            elif den1 > 0:
+                out[r, c] = num1 / den1
+            elif math.isfinite(surface[r, c]):
+                out[r, c] = surface[r, c]
+            else:
+                out[r, c] = math.nan
+
+
+@njit(cache=True, nogil=True)
+def erode_step(z, square, tmp, out):
+    """One 3x3 step of an erosion (minimum) of ``z`` into ``out``: over the
+    3x3 square (a minimum along the rows into ``tmp``, then along the
+    columns), or over the cross (the cell and its 4 edge neighbours);
+    neighbours beyond the edge are skipped (the same as ``scipy.ndimage``'s
+    ``mode="nearest"`` for these shapes). A dilation is the erosion of
+    ``-z``, negated (both exact)."""
+    ny, nx = z.shape
+    if square:
+        for r in range(ny):
+            for c in range(nx):
+                v = z[r, c]
+                if c > 0:
+                    v = min(v, z[r, c - 1])
+                if c < nx - 1:
+                    v = min(v, z[r, c + 1])
+                tmp[r, c] = v
+        for r in range(ny):
+            for c in range(nx):
+                v = tmp[r, c]
+                if r > 0:
+                    v = min(v, tmp[r - 1, c])
+                if r < ny - 1:
+                    v = min(v, tmp[r + 1, c])
+                out[r, c] = v
+        return
+    for r in range(ny):
+        for c in range(nx):
+            v = z[r, c]
+            if c > 0:
+                v = min(v, z[r, c - 1])
+            if c < nx - 1:
+                v = min(v, z[r, c + 1])
+            if r > 0:
+                v = min(v, z[r - 1, c])
+            if r < ny - 1:
+                v = min(v, z[r + 1, c])
+            out[r, c] = v

@@ -451,11 +451,12 @@ def _window_filter(base):
 
 def ground_reach(filt):
     """How far (in metres) the ground filter's answer at a point depends on
-    the points around it: the largest opening (erosion then dilation, each
-    ``window`` wide) plus a few cells for the low-noise median, the slope
-    and the interpolation."""
-    radius = max(1, math.ceil(filt.window / filt.cell))
-    return (2 * radius + 4) * filt.cell
+    the points around it: :func:`~skpcd.segmentation._ground.reach_cells`
+    cells beyond the point's own, plus one for the rounding of the tile and
+    cell edges."""
+    from skpcd.segmentation._ground import reach_cells
+
+    return (reach_cells(filt) + 1) * float(filt.cell)
 
 
 def _ground_prepare(xyz, index, ground, tile, grid, lo, nxy, cell, reach):
@@ -513,19 +514,77 @@ def _cluster_tile(xyz, owned, eps, min_samples, n_threads):
     return labels[owned], shared, labels[shared]
 
 
+def _held_square(grid, tile, b):
+    """``(xmin, ymin, xmax, ymax)`` of a tile's core square grown by ``b``
+    (the buffer: the area whose points the buffered tile holds; 0: the
+    points it owns), unbounded on the sides at the edge of the grid (edge
+    tiles hold the points beyond)."""
+    row, col = divmod(int(tile), grid.shape[0])
+    x0, y0, x1, y1 = grid.core_bounds(tile)
+    return (
+        -np.inf if col == 0 else x0 - b,
+        -np.inf if row == 0 else y0 - b,
+        np.inf if col == grid.shape[0] - 1 else x1 + b,
+        np.inf if row == grid.shape[1] - 1 else y1 + b,
+    )
+
+
 def _eps_prepare(xyz, index, ground, tile, grid, queries):
     """The non-ground points of a buffered tile and, among its own points,
-    the queries of the eps estimate; the scan indices of those."""
+    the queries of the eps estimate with their distance to the edge of the
+    area the tile holds; the scan indices of those queries."""
     mine = np.flatnonzero(grid.owner(xyz) == tile)
     mine = mine[np.isin(index[mine], queries)]
     if not len(mine):
-        return (np.zeros((0, 3)), np.zeros((0, 3))), index[mine]
-    return (np.ascontiguousarray(xyz[~ground]), xyz[mine]), index[mine]
+        return (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)), index[mine]
+    x0, y0, x1, y1 = _held_square(grid, tile, grid.buffer)
+    q = xyz[mine]
+    margin = np.minimum(
+        np.minimum(q[:, 0] - x0, x1 - q[:, 0]), np.minimum(q[:, 1] - y0, y1 - q[:, 1])
+    )
+    return (np.ascontiguousarray(xyz[~ground]), q, margin), index[mine]
 
 
-def _eps_tile(points, queries, k, n_threads):
+def _eps_tile(points, queries, margin, k, n_threads):
     """Distances from each query to its ``k`` nearest ``points`` (itself
-    first)."""
+    first), and which are exact: those whose ``k``-th neighbour is nearer
+    than the edge of the tile's area (``margin``), so that no point beyond
+    it could be nearer; the others (isolated points, whose neighbours are
+    far) come with their coordinates, for :func:`_eps_far_queries`."""
+    from scipy.spatial import cKDTree
+
+    if not len(queries):
+        return np.zeros((0, k)), np.ones(0, dtype=bool), np.zeros((0, 3))
+    tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
+    d, _ = tree.query(queries, k=k, workers=n_threads)
+    d = d.reshape(len(queries), -1)
+    exact = d[:, -1] + 1e-6 < margin
+    return d, exact, queries[~exact]
+
+
+def _reaches(grid, tile, queries, bounds):
+    """Which queries have points of the tile's core square (unbounded at
+    the grid's edges, where its own points may lie beyond) within their
+    ``bounds`` (a square test: it holds every point of the ball)."""
+    x0, y0, x1, y1 = _held_square(grid, tile, 0.0)
+    xy, r = queries[:, :2], bounds[:, None]
+    return np.all(xy + r >= [x0, y0], axis=1) & np.all(xy - r <= [x1, y1], axis=1)
+
+
+def _far_prepare(xyz, index, ground, tile, grid, queries, bounds):
+    """The non-ground points a tile owns, and the queries (rows of
+    ``queries``) whose ball of radius ``bounds`` reaches its core square
+    (unbounded at the grid's edges, like the area its points come from)."""
+    near = np.flatnonzero(_reaches(grid, tile, queries, bounds))
+    own = (grid.owner(xyz) == tile) & ~ground
+    if not len(near) or not own.any():
+        return (np.zeros((0, 3)), np.zeros((0, 3))), np.zeros(0, dtype=np.int64)
+    return (np.ascontiguousarray(xyz[own]), queries[near]), near
+
+
+def _far_tile(points, queries, k, n_threads):
+    """Distances from each query to its ``k`` nearest ``points`` (+inf when
+    there are fewer)."""
     from scipy.spatial import cKDTree
 
     if not len(queries):
@@ -533,6 +592,28 @@ def _eps_tile(points, queries, k, n_threads):
     tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
     d, _ = tree.query(queries, k=k, workers=n_threads)
     return d.reshape(len(queries), -1)
+
+
+def _eps_far_queries(scene, tiles, ground, queries, bounds, k, n_jobs):
+    """The exact distances from each query to its ``k`` nearest non-ground
+    points, for queries whose neighbours their own tile may not hold:
+    each tile whose core square is within ``bounds`` of a query (the
+    distance of its ``k``-th neighbour found in its tile, which the true one
+    cannot exceed) gives the ``k`` nearest of the points it owns, and the
+    ``k`` smallest of those distances are the query's (every point is owned
+    by one tile)."""
+    near = [t for t in tiles if _reaches(scene.grid, t, queries, bounds).any()]
+    parts = [[] for _ in range(len(queries))]
+    for rows, d in _map_tiles(
+        scene, near, _far_prepare, (scene.grid, queries, bounds), _far_tile,
+        (k,), n_jobs, ground=ground,
+    ):  # fmt: skip
+        for row, dist in zip(rows.tolist(), d):
+            parts[row].append(dist)
+    found = np.empty((len(queries), k))
+    for row, dists in enumerate(parts):
+        found[row] = np.sort(np.concatenate(dists))[:k]
+    return found
 
 
 # --- tiled segmentation ---------------------------------------------------
@@ -768,9 +849,10 @@ def _estimate_eps(
     as the untiled estimate (drawn among all non-ground points, in scan
     order), their nearest neighbours searched among the non-ground points of
     their buffered tile, which holds all of them when the k-th neighbour is
-    closer than the buffer (else a warning says the estimate may differ)."""
-    import warnings
-
+    nearer than the edge of the tile's area; for the other queries (isolated
+    points), among the points of every tile within that distance
+    (:func:`_eps_far_queries`). The distances are those of the untiled
+    search, so is the estimate."""
     from sklearn.utils import check_random_state
 
     from skpcd.segmentation._dbscan import AutoEpsDBSCAN, _fit_knee, eps_from_knee
@@ -799,22 +881,24 @@ def _estimate_eps(
         seen += len(rest)
     queries = np.concatenate(queries)
     dist = np.empty((len(queries), k_max + 1))
-    farthest = 0.0
-    for index, d in _map_tiles(
+    far_rows, far_xyz, far_bounds = [], [], []
+    for index, (d, exact, xyz) in _map_tiles(
         scene, tiles, _eps_prepare, (scene.grid, queries), _eps_tile,
         (k_max + 1,), n_jobs, ground=ground,
     ):  # fmt: skip
         if len(index):
-            dist[np.searchsorted(queries, index)] = d
-            farthest = max(farthest, float(d.max()))
-    if farthest > scene.grid.buffer:
-        warnings.warn(
-            f"the eps estimate searched neighbours up to {farthest:g} away, beyond "
-            f"the tile buffer ({scene.grid.buffer:g}): it may differ from the "
-            "untiled estimate; pass a larger tile_buffer or give eps",
-            UserWarning,
-            stacklevel=3,
-        )
+            rows = np.searchsorted(queries, index)
+            dist[rows] = d
+            far_rows.append(rows[~exact])
+            far_xyz.append(xyz)
+            far_bounds.append(d[~exact, -1])
+    if far_rows and sum(map(len, far_rows)):
+        # isolated queries: their neighbours searched in every tile near
+        rows = np.concatenate(far_rows)
+        dist[rows] = _eps_far_queries(
+            scene, tiles, ground, np.concatenate(far_xyz),
+            np.concatenate(far_bounds), k_max + 1, n_jobs,
+        )  # fmt: skip
     mean = dist[:, 1:].mean(axis=0)
     _, _, knee_distance = _fit_knee(np.arange(1, k_max + 1), mean, est.degree)
     # as AutoEpsDBSCAN._estimate (test_tiling checks the two estimates agree)

@@ -6,7 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from skpcd.segmentation import GROUND_PRESETS, GroundFilter
-from skpcd.segmentation._ground import _inpaint, _opening
+from skpcd.segmentation._ground import _objects
+from skpcd.segmentation._ground_kernels import fill_surface, interpolate_terrain
 
 
 def _terrain(n, size, seed, slope=0.05):
@@ -99,18 +100,33 @@ def test_translation_invariance(shift):
     assert (moved == ref).mean() > 0.999
 
 
-def test_opening_and_inpaint_helpers():
+def test_opening_and_interpolation_helpers():
     z = np.zeros((9, 9))
+    known = np.ones(z.shape, dtype=bool)
     z[4, 4] = 5.0  # a one-cell spike goes, a plateau wider than the disk stays
-    assert _opening(z, 1).max() == 0.0
+    objects = _objects(z, known, 1, 0.15, 1.0)
+    assert objects.sum() == 1 and objects[4, 4]
     z[2:7, 2:7] = 3.0
-    assert _opening(z, 1)[4, 4] == 3.0
-    # harmonic fill is exact on linear surfaces
+    assert not _objects(z, known, 1, 0.15, 1.0)[4, 4]
+    # cells without points (+inf) take no part in the opening
+    z[:, :2] = np.inf
+    objects = _objects(z, known & np.isfinite(z), 1, 0.15, 1.0)
+    assert objects[:, :2].all() and not objects[:, 2:].any()
+    # the terrain interpolation is exact on a plane, across a gap
     yy, xx = np.mgrid[0:20, 0:30]
     plane = 0.3 * xx - 0.1 * yy
-    known = np.ones_like(plane, dtype=bool)
-    known[5:12, 8:20] = False
-    np.testing.assert_allclose(_inpaint(np.where(known, plane, 0), known), plane)
+    ground = np.ones_like(plane, dtype=bool)
+    ground[5:12, 8:20] = False
+    dem = np.empty_like(plane)
+    interpolate_terrain(plane, ground, plane, np.ones_like(ground), 12, dem)
+    np.testing.assert_allclose(dem, plane)
+    # the surface fill: known cells kept, near ones filled, far ones +inf
+    known = np.zeros(plane.shape, dtype=bool)
+    known[:, :3] = True
+    surface = np.empty_like(plane)
+    fill_surface(plane, known, 4, surface)
+    np.testing.assert_array_equal(surface[:, :3], plane[:, :3])
+    assert np.isfinite(surface[:, 3:7]).all() and np.isinf(surface[:, 7:]).all()
 
 
 def test_bad_input():
