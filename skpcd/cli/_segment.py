@@ -186,8 +186,9 @@ def segment_file(args, command, fields=None):
     return points, extras, result
 
 
-def _segments(args, points, extras, result, folder):
-    """``(points, fields)`` of each segment, in order."""
+def _segments(args, points, extras, result, folder, *, fields=True):
+    """``(points, fields)`` of each segment, in order (the fields only with
+    ``fields`` and ``--keep-fields``)."""
     from skpcd.segmentation._members import iter_segment_points, segment_members
 
     if points is None:  # tiled: gathered in one pass over the scene
@@ -195,7 +196,7 @@ def _segments(args, points, extras, result, folder):
             args.scene,
             result.labels,
             result.n_segments,
-            fields=args.keep_fields,
+            fields=fields and args.keep_fields,
             folder=folder,
         )
     return (
@@ -325,7 +326,7 @@ def run_identify(args):
             )
         )
         pred, kind, seg_score, seg_sizes = _classify_segments(
-            model, _segments(args, points, {}, result, work), args
+            model, _segments(args, points, {}, result, work, fields=False), args
         )
         classes = list(getattr(model, "classes_", []))
         classes += sorted({str(p) for p in pred} - {str(c) for c in classes})
