@@ -11,6 +11,7 @@ __all__ = [
     "NonFiniteWarning",
     "PointCloudFileError",
     "SkippedFilesWarning",
+    "UntrustedModelError",
 ]
 
 
@@ -61,7 +62,34 @@ class SkippedFilesWarning(UserWarning):
 class IncompatibleModelError(PointCloudFileError):
     """A saved model was written by another skpcd or scikit-learn release.
 
-    Pickled estimators are only safe to load with the versions that wrote
+    Saved estimators are only sure to work with the versions that wrote
     them; :func:`skpcd.io.load_model` raises this instead of guessing. The
     message names both versions.
     """
+
+
+class UntrustedModelError(PointCloudFileError):
+    """A saved model would need more trust than :func:`skpcd.io.load_model` gives.
+
+    Raised, before anything from the file is run, for a pickle (joblib)
+    model loaded without ``trust_pickle=True``, and for a skops model whose
+    payload names types outside ``skpcd.io._model.TRUSTED_TYPES`` and the
+    ``trusted`` argument. The message says how to opt in.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The model file.
+    problem : str
+        What is wrong with it, in words.
+    types : list of str, default=()
+        The fully qualified names of the types that are not trusted (empty
+        for a pickle). Kept as the ``types`` attribute.
+    """
+
+    def __init__(self, path, problem, types=()):
+        self.types = list(types)
+        super().__init__(path, problem)
+
+    def __reduce__(self):
+        return (type(self), (self.path, self.problem, self.types))
