@@ -421,6 +421,14 @@ class CaseBasedClassifier(ClassifierMixin, BaseEstimator):
         self._indexes = self._build_indexes() if algorithm == "approximate" else None
         return self
 
+    def __getstate__(self):
+        # the pynndescent indexes hold generators that skops cannot store;
+        # they are rebuilt from the cases and the seeds on first use
+        state = super().__getstate__()
+        if state.get("_indexes") is not None:
+            state["_indexes"] = None
+        return state
+
     def _build_indexes(self):
         """Per class: its cases, their volume order and a pynndescent index."""
         from pynndescent import NNDescent
@@ -482,6 +490,8 @@ class CaseBasedClassifier(ClassifierMixin, BaseEstimator):
         """
         cols, starts = [], []
         H32 = H.astype(np.float32)
+        if self._indexes is None:  # unpickled: rebuilt once, the same graphs
+            self._indexes = self._build_indexes()
         for cases, by_volume, index in self._indexes:
             starts.append(sum(a.shape[1] for a in cols))
             if index is None or len(cases) <= 2 * m:

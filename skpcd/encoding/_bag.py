@@ -373,6 +373,15 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
         self.vocabulary_ = np.asarray(centers)
         return seed
 
+    def __getstate__(self):
+        # the pynndescent index holds generators that skops (and some
+        # pickle protocols) cannot store; it is rebuilt from the vocabulary
+        # and its seed on first use, the same graph (one thread)
+        state = super().__getstate__()
+        if "_index" in state:
+            state["_index"] = None
+        return state
+
     def _build_index(self, seed):
         """The pynndescent index over the words, for approximate assignment."""
         from pynndescent import NNDescent
@@ -404,6 +413,8 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
         before = numba.get_num_threads()
         numba.set_num_threads(min(n_threads, numba.config.NUMBA_NUM_THREADS))
         try:
+            if getattr(self, "_index", None) is None:  # unpickled: rebuilt once
+                self._index = self._build_index(self._index_seed)
             indices = self._index.query(
                 np.ascontiguousarray(block, dtype=np.float32),
                 k=k,
@@ -450,6 +461,7 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
         )
         self.assignment_ = "approximate" if approximate else "exact"
         if approximate:
+            self._index_seed = seed
             self._index = self._build_index(seed)
         elif hasattr(self, "_index"):
             del self._index
