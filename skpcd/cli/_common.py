@@ -110,6 +110,16 @@ def add_scheduler(parser):
     )
 
 
+def add_trust_pickle(parser):
+    parser.add_argument(
+        "--trust-pickle",
+        action="store_true",
+        help="also load a model saved as a pickle (joblib: older skpcd releases, "
+        "save_model(format='joblib')). DANGER: unpickling runs code from the "
+        "file; only for files you made yourself or fully trust",
+    )
+
+
 def add_skip_unreadable(parser):
     parser.add_argument(
         "--skip-unreadable",
@@ -211,7 +221,7 @@ def load_model_for(args, command):
     """The model of ``args.model``, refused when it cannot predict."""
     from skpcd.io import load_model
 
-    model = load_model(args.model)
+    model = load_model(args.model, trust_pickle=args.trust_pickle)
     if not hasattr(model, "predict"):
         raise CommandError(
             command,

@@ -9,6 +9,7 @@ from skpcd.cli._common import (
     CommandError,
     add_n_jobs,
     add_skip_unreadable,
+    add_trust_pickle,
     labels_path,
     load_labelled,
     load_model_for,
@@ -108,6 +109,7 @@ def add_parsers(sub):
     )
     add_skip_unreadable(sc)
     sc.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_trust_pickle(sc)
     sc.set_defaults(func=run_score)
     return ev, sc
 

@@ -11,6 +11,7 @@ from skpcd.cli._common import (
     add_output_options,
     add_scheduler,
     add_skip_unreadable,
+    add_trust_pickle,
     check_folder,
     check_not_an_input,
     check_output,
@@ -30,14 +31,15 @@ def add_parsers(sub):
         help="fit an identification pipeline (the default one unless --pipeline) "
         "and save it",
         description="Fit the default pipeline on labelled segments and save it "
-        "with joblib, with the skpcd and scikit-learn versions.",
+        "(skops format, with a checksum and the skpcd and scikit-learn versions; "
+        "loading it runs no code from the file).",
     )
     fit.add_argument("folder", help="folder of per-segment files")
     add_pipeline_option(fit)
     fit.add_argument(
         "--labels", help="CSV of file,label rows (default: FOLDER/labels.csv)"
     )
-    fit.add_argument("-o", "--output", required=True, help="model file (.joblib)")
+    fit.add_argument("-o", "--output", required=True, help="model file (.skpcd)")
     fit.add_argument("--random-state", type=int, default=0, help="seed (default 0)")
     add_n_jobs(fit)
     add_skip_unreadable(fit)
@@ -58,6 +60,7 @@ def add_parsers(sub):
     add_skip_unreadable(pred)
     add_output_options(pred)
     add_scheduler(pred)
+    add_trust_pickle(pred)
     pred.set_defaults(func=run_predict)
     return fit, pred
 

@@ -14,6 +14,7 @@ from skpcd.cli._common import (
     add_n_jobs,
     add_output_options,
     add_scheduler,
+    add_trust_pickle,
     check_output,
     load_model_for,
     predict_or_explain,
@@ -124,6 +125,7 @@ def add_parsers(sub):
         "-o", "--output", required=True, help="labelled scene (.las .laz .ply .pcd...)"
     )
     add_segmentation_options(ident)
+    add_trust_pickle(ident)
     ident.set_defaults(func=run_identify)
     return seg, ident
 

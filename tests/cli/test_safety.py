@@ -317,3 +317,43 @@ def test_score_prints_accuracy_and_confusion_matrix(tmp_path, capsys, labelled_f
     diagonal = sum(int(r[1 + i]) for i, r in enumerate(rows))
     assert diagonal / len(labels) == pytest.approx(accuracy, abs=1e-4)
     assert "precision" in out and "recall" in out
+
+
+class _Payload:
+    """A pickle that would create a file when unpickled."""
+
+    def __init__(self, path):
+        self.path = path
+
+    def __reduce__(self):
+        return (open, (self.path, "w"))
+
+
+def test_pickled_models_load_only_with_trust_pickle(tmp_path, capsys, labelled_folder):
+    # before: a pickle's __reduce__ ran (its file was created) although
+    # predict then rejected the model
+    import joblib
+
+    from skpcd.io import load_model, save_model
+
+    folder = tmp_path / "segs"
+    labelled_folder(folder, n_per_class=1)
+    skops_model = tmp_path / "m.skpcd"
+    assert main(["fit", str(folder), "-o", str(skops_model), "--quiet"]) == 0
+    pickled = tmp_path / "m.joblib"
+    save_model(load_model(skops_model), pickled, format="joblib")
+    evil = tmp_path / "evil.joblib"
+    joblib.dump(_Payload(str(tmp_path / "pwned")), evil)
+    out = tmp_path / "p.csv"
+    for model in (pickled, evil):
+        argv = ["predict", str(model), str(folder), "-o", str(out), "--quiet"]
+        capsys.readouterr()
+        assert main(argv) == 1
+        assert "--trust-pickle" in capsys.readouterr().err
+        assert not out.exists() and not (tmp_path / "pwned").exists()
+    argv = ["predict", str(pickled), str(folder), "-o", str(out), "--trust-pickle"]
+    assert main(argv) == 0 and out.is_file()
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main(["predict", "--help"])
+    assert "DANGER" in " ".join(capsys.readouterr().out.split())

@@ -54,7 +54,7 @@ def test_file_without_label(folder):
 
 
 def test_bad_labels_files(folder):
-    with pytest.raises(MissingFileError, match="labels file not found"):
+    with pytest.raises(MissingFileError, match="no such file"):
         read_segments(folder, folder / "nolabels.csv")
     bad = folder / "bad.txt"
     bad.write_text("obj1.xyz,b,extra\n")
