@@ -2,6 +2,7 @@
 
 from skpcd.preprocessing._neighbors import Neighborhoods, compute_neighborhoods
 from skpcd.preprocessing._normals import NormalEstimator, estimate_normals
+from skpcd.preprocessing._outliers import RadiusOutlierFilter, StatisticalOutlierFilter
 from skpcd.preprocessing._sampling import GridSampler, grid_sample
 from skpcd.preprocessing._spacing import point_spacing
 
@@ -9,6 +10,8 @@ __all__ = [
     "GridSampler",
     "Neighborhoods",
     "NormalEstimator",
+    "RadiusOutlierFilter",
+    "StatisticalOutlierFilter",
     "compute_neighborhoods",
     "estimate_normals",
     "grid_sample",

@@ -43,12 +43,12 @@ def refuse_sequence(X):
 
 
 def check_scene(X, estimator=None, *, min_points=1, reset=True):
-    """One cloud as X: ``(n_points, n_features)`` to contiguous float64 xyz.
+    """One cloud as X: ``(n_points, 3+)`` to contiguous float64 xyz.
 
-    Columns beyond the third (intensity...) are ignored; with fewer than
-    three, the missing coordinates are zero (DBSCAN in 1-D or 2-D). With an
-    estimator, sklearn's :func:`~sklearn.utils.validation.validate_data`
-    checks X and records ``n_features_in_``.
+    Columns beyond the third (intensity...) are ignored; fewer than three
+    is an error (a scene has x, y and z). With an estimator, sklearn's
+    :func:`~sklearn.utils.validation.validate_data` checks X and records
+    ``n_features_in_``.
     """
     kwargs = {"dtype": np.float64, "ensure_min_samples": min_points}
     refuse_sequence(X)
@@ -58,12 +58,15 @@ def check_scene(X, estimator=None, *, min_points=1, reset=True):
         X = check_array(X, input_name="X", **kwargs)
     else:
         X = validate_data(estimator, X, reset=reset, **kwargs)
-    n, d = X.shape
-    if d == 3:
+    if X.shape[1] < 3:
+        name = "the scene" if estimator is None else type(estimator).__name__
+        raise ValueError(
+            f"X has {X.shape[1]} feature(s); {name} needs at least 3 columns "
+            "(x, y, z); columns beyond the third are ignored."
+        )
+    if X.shape[1] == 3:
         return np.ascontiguousarray(X)  # no copy when it already is
-    xyz = np.zeros((n, 3))
-    xyz[:, : min(d, 3)] = X[:, :3]
-    return xyz
+    return np.ascontiguousarray(X[:, :3])
 
 
 def _radius_grid(xyz, eps):
@@ -142,6 +145,13 @@ def grid_dbscan(xyz, eps, min_samples, *, n_jobs=None):
     from skpcd.preprocessing import _grid_kernels as g
     from skpcd.segmentation import _cluster_kernels as k
 
+    xyz = np.ascontiguousarray(xyz, dtype=np.float64)
+    if xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise ValueError(
+            f"xyz must be an array of shape (n_points, 3); got shape {xyz.shape}."
+        )
+    if not np.isfinite(xyz).all():
+        raise ValueError("xyz contains NaN or infinite coordinates.")
     n = len(xyz)
     if n == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.bool_)

@@ -44,8 +44,10 @@ GROUND_PRESETS = {
     },
 }
 
-# Cells of the raster at most (a 1 km square at 5 mm): beyond, ask for a
-# larger ``cell`` rather than allocating gigabytes.
+# Cells computed at most (a 1 km square at 7 cm): the rasters of the
+# islands of occupied cells (each grown by twice the reach), summed; beyond,
+# ask for a larger ``cell`` rather than allocating gigabytes. Also the
+# largest ``dem_`` / ``objects_`` assembled as one array.
 _MAX_CELLS = 200_000_000
 
 
@@ -130,6 +132,93 @@ def _slope(dem, cell):
     return np.hypot(*grads)
 
 
+# Largest cell index along an axis: cell indices are computed in float64,
+# exact up to 2**53.
+_MAX_INDEX = 2**53
+
+
+def _cell_indices(xyz, cell):
+    """The raster of a scene: its corner, its size in cells and the (col,
+    row) cell of every point; a ValueError when the coordinates are not
+    finite or span more cells than can be indexed."""
+    if not np.isfinite(xyz).all():
+        raise ValueError("X contains NaN or infinite coordinates.")
+    lo = xyz[:, :2].min(axis=0)
+    extent = xyz[:, :2].max(axis=0) - lo
+    with np.errstate(over="ignore", invalid="ignore"):
+        n = np.floor(extent / cell) + 1
+    if not (np.isfinite(n).all() and (n <= _MAX_INDEX).all()):
+        raise ValueError(
+            f"the scene ({extent[0]:.6g} x {extent[1]:.6g}) spans more than "
+            f"2**53 cells of {cell} along an axis: the cells are not "
+            "representable; check the coordinates (a unit or a scale error?) "
+            "or use a larger cell"
+        )
+    nx, ny = (int(v) for v in n)
+    cells = np.floor((xyz[:, :2] - lo) / cell).astype(np.int64)
+    np.clip(cells, 0, [nx - 1, ny - 1], out=cells)
+    return lo, nx, ny, cells
+
+
+def _islands(cells, reach):
+    """Rectangles of cells ``(c0, r0, c1, r1)`` (inclusive) around groups of
+    occupied cells, each farther than ``2 * reach`` cells from the others,
+    and the island of every point.
+
+    The occupied cells are grouped by blocks of ``reach`` cells (touching
+    blocks joined), then rectangles at most ``2 * reach`` apart merged until
+    none is: the cost follows the occupied blocks, not the scene's bounding
+    box."""
+    from scipy.sparse import coo_array
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    # the occupied blocks (sorted by a key), their cells' bounds
+    blk = cells // reach
+    nb = int(blk[:, 1].max()) + 1
+    if (int(blk[:, 0].max()) + 1) * nb < 2**62:
+        key = blk[:, 0] * nb + blk[:, 1]
+    else:  # too many blocks for one int64 key: rank each column first
+        ranks = [np.unique(v, return_inverse=True)[1].ravel() for v in blk.T]
+        key = ranks[0] * (int(ranks[1].max()) + 1) + ranks[1]
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    starts = np.flatnonzero(np.r_[True, sorted_key[1:] != sorted_key[:-1]])
+    block_of = np.empty(len(cells), dtype=np.int64)
+    block_of[order] = np.cumsum(np.r_[False, sorted_key[1:] != sorted_key[:-1]])
+    blocks = blk[order[starts]]
+    sorted_cells = cells[order]
+    block_lo = np.minimum.reduceat(sorted_cells, starts, axis=0)
+    block_hi = np.maximum.reduceat(sorted_cells, starts, axis=0)
+    del sorted_cells
+    pairs = cKDTree(blocks).query_pairs(1, p=np.inf, output_type="ndarray")
+    graph = coo_array(
+        (np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(blocks),) * 2
+    )
+    _, label = connected_components(graph, directed=False)
+    while True:
+        k = label.max() + 1
+        lo = np.full((k, 2), np.iinfo(np.int64).max)
+        hi = np.full((k, 2), -1)
+        np.minimum.at(lo, label, block_lo)
+        np.maximum.at(hi, label, block_hi)
+        # rectangles at most 2 * reach apart (their grown rectangles meet)
+        pr, pc = [], []
+        step = max(1, 2**21 // k)
+        for i in range(0, k, step):
+            a, b = lo[i : i + step, None], hi[i : i + step, None]
+            gap = np.maximum(np.maximum(lo[None] - b, a - hi[None]), 0)
+            rows, cols = np.nonzero((gap <= 2 * reach).all(axis=2))
+            pr.append(rows + i)
+            pc.append(cols)
+        pr, pc = np.concatenate(pr), np.concatenate(pc)
+        if (pr == pc).all():
+            return np.column_stack([lo, hi]), label[block_of]
+        graph = coo_array((np.ones(len(pr)), (pr, pc)), shape=(k, k))
+        _, joined = connected_components(graph, directed=False)
+        label = joined[label]
+
+
 class GroundFilter(BaseEstimator):
     """Ground points of a LiDAR scene by the simple morphological filter (SMRF).
 
@@ -179,7 +268,9 @@ class GroundFilter(BaseEstimator):
         centred at ``origin_ + cell * (c + 0.5, r + 0.5)``. NaN far from
         the points (no ground cell within the reach of step 3, no point
         within 4 cells): :meth:`height` is NaN there and :meth:`predict`
-        False.
+        False. Assembled on access when the scene is several islands (see
+        Notes); a ValueError when that array would exceed 200 million
+        cells (:meth:`height` and :meth:`predict` still work).
     origin_ : ndarray of shape (2,)
         x and y of the raster corner.
     objects_ : ndarray of shape (n_rows, n_cols), dtype bool
@@ -220,6 +311,21 @@ class GroundFilter(BaseEstimator):
     versions filled both by harmonic (Laplace) interpolation of the whole
     raster; the results differ slightly near large gaps (the tests' quality
     bounds hold for both).
+
+    The cost follows the occupied cells, not the bounding box of the
+    scene: the occupied cells are grouped into islands more than twice
+    :func:`reach_cells` apart, and each island is filtered on its own
+    raster (its bounding rectangle grown by twice the reach), which gives
+    the whole raster's answer, bit for bit, on every cell within the reach
+    of a point; the other cells have no terrain (NaN). A point far from the
+    scene (an outlier 100 km away) is thus its own island, ground or not by
+    the same local rule (a lone point lies on its own terrain), at the cost
+    of a few hundred thousand cells. The islands' cells, summed, may not
+    exceed 200 million (a ValueError asks for a larger ``cell``), nor may
+    the scene span more than 2**53 cells along an axis (coordinates of
+    1e30: a ValueError). Remove outliers beforehand with
+    :class:`~skpcd.preprocessing.StatisticalOutlierFilter` or
+    :class:`~skpcd.preprocessing.RadiusOutlierFilter` when they are noise.
 
     ``GROUND_PRESETS["aerial"]`` are these defaults (those of Pingel et al.
     and PDAL's ``filters.smrf``); ``GROUND_PRESETS["mobile"]`` are for
@@ -284,13 +390,11 @@ class GroundFilter(BaseEstimator):
     def _minimum_surface(self, xyz):
         from skpcd.segmentation._ground_kernels import cell_minimum
 
-        lo = xyz[:, :2].min(axis=0)
-        extent = xyz[:, :2].max(axis=0) - lo
-        nx, ny = (np.floor(extent / self.cell) + 1).astype(np.int64)
+        lo, nx, ny, _ = _cell_indices(xyz, float(self.cell))
         if nx * ny > _MAX_CELLS:
             raise ValueError(
-                f"the scene ({extent[0]:.1f} x {extent[1]:.1f}) needs {nx * ny} "
-                f"cells of {self.cell}; use a larger cell"
+                f"the scene needs {nx * ny} cells of {self.cell} (more than "
+                f"{_MAX_CELLS}); use a larger cell"
             )
         zmin = np.full((ny, nx), np.inf)
         cell_minimum(xyz, lo[0], lo[1], float(self.cell), nx, ny, 0, 0, zmin)
@@ -305,6 +409,25 @@ class GroundFilter(BaseEstimator):
         out = np.empty_like(known)
         drop_low_noise(zmin, known, float(self.low_noise), out)
         return out
+
+    def _terrain(self, zmin):
+        """The object cells and the terrain model of a minimum surface."""
+        from skpcd.segmentation._ground_kernels import (
+            fill_surface,
+            interpolate_terrain,
+        )
+
+        known = self._drop_low_noise(zmin, np.isfinite(zmin))
+        surface = np.empty_like(zmin)
+        fill_surface(zmin, known, _FILL_CELLS, surface)
+        objects = _objects(
+            surface, known, opening_cells(self), float(self.slope), float(self.cell)
+        )
+        reach = terrain_cells(self)
+        near = ndimage.maximum_filter(known, size=2 * reach + 1, mode="constant")
+        dem = np.empty_like(zmin)
+        interpolate_terrain(zmin, ~objects, surface, near, reach, dem)
+        return objects, dem
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, X, y=None):
@@ -322,27 +445,102 @@ class GroundFilter(BaseEstimator):
         self : object
             The fitted filter.
         """
-        from skpcd.segmentation._ground_kernels import (
-            fill_surface,
-            interpolate_terrain,
-        )
+        from skpcd.segmentation._ground_kernels import cell_minimum
 
         xyz = self._xyz(X, reset=True)
-        lo, zmin = self._minimum_surface(xyz)
-        known = self._drop_low_noise(zmin, np.isfinite(zmin))
-        surface = np.empty_like(zmin)
-        fill_surface(zmin, known, _FILL_CELLS, surface)
-        objects = _objects(
-            surface, known, opening_cells(self), float(self.slope), float(self.cell)
-        )
+        if type(self)._minimum_surface is not GroundFilter._minimum_surface:
+            # a window of a larger raster (the tiled segmentation)
+            lo, zmin = self._minimum_surface(xyz)
+            self._fit_patches(xyz, lo, [(0, 0, *self._terrain(zmin))])
+            return self
+        cell = float(self.cell)
+        lo, nx, ny, cells = _cell_indices(xyz, cell)
+        reach = reach_cells(self) + 1
+        if nx * ny <= len(xyz):
+            # no larger than the points: the whole raster, no island search
+            rects, label = np.array([[0, 0, nx - 1, ny - 1]]), None
+        else:
+            rects, label = _islands(cells, reach)
+        # each island's filter on its rectangle grown by twice the reach
+        # gives the whole raster's answer on the rectangle grown by the
+        # reach, which holds every cell with a point within the reach; the
+        # other cells are NaN (no terrain) and objects (empty)
+        size = [nx, ny]
+        window = [
+            (np.maximum(r[:2] - 2 * reach, 0), np.minimum(r[2:] + 2 * reach, size))
+            for r in rects
+        ]
+        n_cells = sum(int(np.prod(b - a + 1)) for a, b in window)
+        if n_cells > _MAX_CELLS:
+            raise ValueError(
+                f"the occupied part of the scene needs {n_cells} cells of "
+                f"{self.cell} (more than {_MAX_CELLS}); use a larger cell"
+            )
+        if len(rects) == 1:
+            zmin = np.full((ny, nx), np.inf)
+            cell_minimum(xyz, lo[0], lo[1], cell, nx, ny, 0, 0, zmin)
+            self._fit_patches(xyz, lo, [(0, 0, *self._terrain(zmin))])
+            return self
+        order = np.argsort(label, kind="stable")
+        bounds = np.searchsorted(label[order], np.arange(len(rects) + 1))
+        patches = []
+        self._shape = (ny, nx)
         self.origin_ = lo
-        self.objects_ = objects
-        reach = terrain_cells(self)
-        near = ndimage.maximum_filter(known, size=2 * reach + 1, mode="constant")
-        self.dem_ = np.empty_like(zmin)
-        interpolate_terrain(zmin, ~objects, surface, near, reach, self.dem_)
-        self.ground_ = self._ground(xyz)
+        ground = np.zeros(len(xyz), dtype=bool)
+        for i, ((c0, r0), (c1, r1)) in enumerate(window):
+            mine = order[bounds[i] : bounds[i + 1]]
+            pts = np.ascontiguousarray(xyz[mine])
+            zmin = np.full((r1 - r0 + 1, c1 - c0 + 1), np.inf)
+            cell_minimum(pts, lo[0], lo[1], cell, nx, ny, c0, r0, zmin)
+            objects, dem = self._terrain(zmin)
+            k0 = np.maximum(rects[i, :2] - reach, 0)
+            k1 = np.minimum(rects[i, 2:] + reach, [nx - 1, ny - 1])
+            part = (
+                slice(k0[1] - r0, k1[1] - r0 + 1),
+                slice(k0[0] - c0, k1[0] - c0 + 1),
+            )
+            patches.append((int(k0[0]), int(k0[1]), objects[part], dem[part]))
+            ground[mine] = self._ground_patch(patches[-1], pts)
+        # patches (c0, r0, objects, dem) of the raster of _shape cells, NaN
+        # and objects elsewhere
+        self._patches = patches
+        self.ground_ = ground
         return self
+
+    def _fit_patches(self, xyz, lo, patches):
+        """Store the fitted raster of one patch: the whole raster, or the
+        tile's window."""
+        self.origin_ = lo
+        self._shape = None
+        self._patches = patches
+        self.ground_ = self._ground(xyz)
+
+    def _dense(self, k, fill):
+        check_is_fitted(self)
+        if self._shape is None:
+            return self._patches[0][k]
+        ny, nx = self._shape
+        if nx * ny > _MAX_CELLS:
+            raise ValueError(
+                f"the raster of the scene has {nx * ny} cells (more than "
+                f"{_MAX_CELLS}), most far from every point; use height() or "
+                "predict()"
+            )
+        out = np.full(self._shape, fill)
+        for c0, r0, *grids in self._patches:
+            g = grids[k - 2]
+            out[r0 : r0 + g.shape[0], c0 : c0 + g.shape[1]] = g
+        return out
+
+    @property
+    def dem_(self):
+        """Terrain height at the cell centres (see the class docstring)."""
+        return self._dense(3, np.nan)
+
+    @property
+    def objects_(self):
+        """Cells flagged as objects (or empty, or low noise)."""
+        return self._dense(2, True)
 
     def height(self, X):
         """Height of points above the terrain model.
@@ -360,7 +558,47 @@ class GroundFilter(BaseEstimator):
         """
         check_is_fitted(self)
         xyz = self._xyz(X, reset=False)
-        return xyz[:, 2] - self._at(self.dem_, xyz)
+        return xyz[:, 2] - self._sample(xyz, slope=False)
+
+    def _sample(self, xyz, slope):
+        """The DEM (or its slope) interpolated at the points."""
+        if self._shape is None:
+            dem = self._patches[0][3]
+            grid = _slope(dem, float(self.cell)) if slope else dem
+            return self._at(grid, xyz)
+        out = np.full(len(xyz), np.nan)
+        if not np.isfinite(xyz[:, :2]).all():
+            raise ValueError("X contains NaN or infinite coordinates.")
+        ny, nx = self._shape
+        u = np.clip((xyz[:, :2] - self.origin_) / float(self.cell), 0, [nx - 1, ny - 1])
+        for c0, r0, _, dem in self._patches:
+            h, w = dem.shape
+            mine = np.flatnonzero(
+                (u[:, 0] >= c0)
+                & (u[:, 0] < c0 + w)
+                & (u[:, 1] >= r0)
+                & (u[:, 1] < r0 + h)
+            )
+            if len(mine):
+                out[mine] = self._patch_at(c0, r0, dem, xyz[mine], slope)
+        return out
+
+    def _patch_at(self, c0, r0, dem, xyz, slope):
+        from skpcd.segmentation._ground_kernels import bilinear
+
+        grid = _slope(dem, float(self.cell)) if slope else dem
+        out = np.empty(len(xyz))
+        ny, nx = self._shape
+        x0, y0 = self.origin_
+        bilinear(xyz, x0, y0, float(self.cell), nx, ny, c0, r0, grid, out)
+        return out
+
+    def _ground_patch(self, patch, xyz):
+        c0, r0, _, dem = patch
+        dz = np.abs(xyz[:, 2] - self._patch_at(c0, r0, dem, xyz, False))
+        return dz <= self.threshold + self.scalar * self._patch_at(
+            c0, r0, dem, xyz, True
+        )
 
     def _at(self, grid, xyz):
         from skpcd.segmentation._ground_kernels import bilinear
@@ -372,8 +610,12 @@ class GroundFilter(BaseEstimator):
         return out
 
     def _ground(self, xyz):
-        slope = _slope(self.dem_, float(self.cell))
-        dz = np.abs(xyz[:, 2] - self._at(self.dem_, xyz))
+        if self._shape is not None:
+            dz = np.abs(xyz[:, 2] - self._sample(xyz, slope=False))
+            return dz <= self.threshold + self.scalar * self._sample(xyz, slope=True)
+        dem = self._patches[0][3]
+        slope = _slope(dem, float(self.cell))
+        dz = np.abs(xyz[:, 2] - self._at(dem, xyz))
         return dz <= self.threshold + self.scalar * self._at(slope, xyz)
 
     def predict(self, X):

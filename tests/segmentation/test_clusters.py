@@ -160,16 +160,22 @@ def test_n_jobs_and_read_only_input(monkeypatch):
     )
 
 
-def test_fewer_columns_are_padded_and_extra_columns_ignored():
+def test_fewer_columns_are_refused_and_extra_columns_ignored():
+    # a scene has x, y and z: two columns are an error (issue 15), not a
+    # plane at z = 0; columns beyond the third (intensity...) are ignored
     rng = np.random.default_rng(0)
-    xy = rng.random((300, 2)) * 5
-    padded = np.column_stack([xy, np.zeros(300)])
+    xyz = np.column_stack([rng.random((300, 2)) * 5, np.zeros(300)])
     ec = EuclideanClusters(eps=0.3, min_cluster_size=1)
-    np.testing.assert_array_equal(ec.fit(xy).labels_, ec.fit(padded).labels_)
-    with_intensity = np.column_stack([padded, rng.random(300) * 100])
-    np.testing.assert_array_equal(
-        ec.fit(with_intensity).labels_, ec.fit(padded).labels_
-    )
+    for est in (ec, AutoEpsDBSCAN()):
+        with pytest.raises(ValueError, match=r"2 feature.*needs at least 3"):
+            est.fit(xyz[:, :2])
+    with_intensity = np.column_stack([xyz, rng.random(300) * 100])
+    np.testing.assert_array_equal(ec.fit(with_intensity).labels_, ec.fit(xyz).labels_)
+    for bad in (xyz[:, :2], with_intensity, xyz[:, 0]):
+        with pytest.raises(ValueError, match=r"shape \(n_points, 3\)"):
+            grid_dbscan(bad, 0.3, 2)
+    with pytest.raises(ValueError, match="NaN or infinite"):
+        grid_dbscan(np.array([[0.0, 0, np.inf], [0, 0, 0]]), 0.3, 2)
 
 
 def test_duplicated_points_are_one_cluster():
@@ -218,7 +224,22 @@ def test_memory_is_linear_not_neighbourhoods():
 
 
 # GroundFilter needs x, y and z: the checks that fit it on 2 features fail
-# with its clear error; the clusterers pass every check.
+# with its clear error.
+# A scene has x, y and z (issue 15): the clusterers refuse the checks'
+# 2-feature blobs with a clear error, as GroundFilter does.
+SCENE_EXPECTED_FAILURES = dict.fromkeys(
+    (
+        "check_estimators_overwrite_params",
+        "check_estimators_fit_returns_self",
+        "check_readonly_memmap_input",
+        "check_clustering",
+        "check_clustering(readonly_memmap=True)",
+        "check_fit_idempotent",
+        "check_fit_check_is_fitted",
+        "check_n_features_in",
+    ),
+    "a scene needs 3 columns (x, y, z); the check fits it on 2",
+)
 GROUND_EXPECTED_FAILURES = dict.fromkeys(
     (
         "check_estimators_overwrite_params",
@@ -239,7 +260,9 @@ GROUND_EXPECTED_FAILURES = dict.fromkeys(
         GroundFilter(),
     ],
     expected_failed_checks=lambda est: (
-        GROUND_EXPECTED_FAILURES if isinstance(est, GroundFilter) else {}
+        GROUND_EXPECTED_FAILURES
+        if isinstance(est, GroundFilter)
+        else SCENE_EXPECTED_FAILURES
     ),
 )
 def test_sklearn_compatible(estimator, check):

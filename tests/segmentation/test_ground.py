@@ -153,3 +153,106 @@ def test_point_order_invariance():
     perm = np.random.default_rng(0).permutation(len(X))
     gf = GroundFilter().fit(X)
     np.testing.assert_array_equal(GroundFilter().fit_predict(X[perm]), gf.ground_[perm])
+
+
+class _DenseGroundFilter(GroundFilter):
+    # the filter on the whole bounding raster (the path of a window of a
+    # larger raster): the reference of the island path
+    def _minimum_surface(self, xyz):
+        return GroundFilter._minimum_surface(self, xyz)
+
+
+@pytest.mark.parametrize("preset", ["aerial", "mobile"])
+def test_far_points_are_islands_equal_to_the_whole_raster(preset):
+    # issue 15, finding 3: points far from the scene are filtered on their
+    # own rasters (islands); the answer is the whole raster's, bit for bit
+    ground, objects = _scene(4)
+    far = np.array([[400, 30, 5.0], [405, 33, 5.5], [30, 420, -3], [250, 250, 0]])
+    X = np.vstack([ground, objects, far])
+    sparse = GroundFilter(**GROUND_PRESETS[preset]).fit(X)
+    dense = _DenseGroundFilter(**GROUND_PRESETS[preset]).fit(X)
+    assert len(sparse._patches) == 4 and len(dense._patches) == 1
+    np.testing.assert_array_equal(sparse.ground_, dense.ground_)
+    np.testing.assert_array_equal(sparse.dem_, dense.dem_)
+    np.testing.assert_array_equal(sparse.objects_, dense.objects_)
+    assert sparse.ground_[-4:].all()  # each far point lies on its own terrain
+    rng = np.random.default_rng(0)
+    Q = np.column_stack([rng.uniform(-20, 450, (20_000, 2)), rng.normal(0, 1, 20_000)])
+    np.testing.assert_array_equal(sparse.height(Q), dense.height(Q))
+    np.testing.assert_array_equal(sparse.predict(Q), dense.predict(Q))
+
+
+_FAR_OUTLIER = """
+import resource, sys
+import numpy as np
+from skpcd.segmentation import GroundFilter
+rng = np.random.default_rng(0)
+pts = np.column_stack([rng.uniform(0, 100, (20_000, 2)), rng.normal(0, 0.05, 20_000)])
+GroundFilter().fit(pts[:2000])  # compile outside the limit
+status = open("/proc/self/status").read().split("VmSize:")[1]
+vm = int(status.split()[0])
+limit = vm * 1024 + 300 * 2**20
+resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+X = np.vstack([pts, [[1e5, 1e5, 0.0]]])
+gf = GroundFilter().fit(X)
+assert gf.ground_.all(), gf.ground_.sum()
+try:
+    gf.dem_
+except ValueError as e:
+    assert "use height() or predict()" in str(e)
+else:
+    raise AssertionError("dem_ of 1e10 cells")
+print("ok")
+"""
+
+
+def test_far_outlier_costs_its_own_cells_not_the_bounding_box():
+    # 20,000 points and one 100 km away: a raster of 1e10 cells, of which
+    # the filter computes the islands around the points only (under 300 MB
+    # of address space above the warmed-up interpreter; seconds, with a
+    # generous timeout for a loaded machine)
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-c", _FAR_OUTLIER],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip() == "ok"
+
+
+def test_occupied_cells_cap(monkeypatch):
+    import skpcd.segmentation._ground as module
+
+    monkeypatch.setattr(module, "_MAX_CELLS", 10_000)
+    X = np.array([[0.0, 0, 0], [1e6, 1e6, 0]])
+    with pytest.raises(ValueError, match=r"occupied part .* cells .*use a larger"):
+        GroundFilter().fit(X)
+
+
+@pytest.mark.parametrize("scale", [1e30, 1e300])
+def test_unrepresentable_cells_are_a_clear_error(scale):
+    X = np.array([[0.0, 0, 0], [1.0, 1, 0], [scale, scale, 0]])
+    with pytest.raises(ValueError, match="not representable"):
+        GroundFilter().fit(X)
+    from skpcd.segmentation import segment_scene
+
+    with pytest.raises(ValueError, match="not representable"):
+        segment_scene(X)
+
+
+def test_two_columns_refused_everywhere():
+    from skpcd.segmentation import segment_scene
+
+    X = np.random.default_rng(0).random((100, 2))
+    with pytest.raises(ValueError, match="needs at least 3"):
+        GroundFilter().fit(X)
+    with pytest.raises(ValueError, match="needs at least 3"):
+        segment_scene(X)
+    with pytest.raises(ValueError, match="needs at least 3"):
+        segment_scene(X, ground=None)
+    with pytest.raises(ValueError, match=r"NaN|infinity"):
+        GroundFilter().fit([[0.0, 0, np.nan], [1, 1, 1]])
