@@ -12,7 +12,12 @@ from numbers import Integral, Real
 import numpy as np
 from sklearn.base import clone
 from sklearn.utils import check_random_state
-from sklearn.utils._param_validation import Interval, StrOptions, validate_params
+from sklearn.utils._param_validation import (
+    HasMethods,
+    Interval,
+    StrOptions,
+    validate_params,
+)
 
 from skpcd.segmentation._clusters import (
     EuclideanClusters,
@@ -64,6 +69,11 @@ class SceneSegmentation(typing.NamedTuple):
         "tile_size": [Interval(Real, 0, None, closed="neither"), None],
         "tile_buffer": [Interval(Real, 0, None, closed="left"), None],
         "temp_folder": [str, os.PathLike, None],
+        "denoise": [
+            StrOptions({"statistical", "radius"}),
+            HasMethods("fit_predict"),
+            None,
+        ],
     },
     prefer_skip_nested_validation=True,
 )
@@ -82,6 +92,7 @@ def segment_scene(
     tile_size=None,
     tile_buffer=None,
     temp_folder=None,
+    denoise=None,
 ):
     """Cut a LiDAR scene into object segments.
 
@@ -148,6 +159,14 @@ def segment_scene(
         Where the tile files and the result arrays are spilled with
         ``tile_size`` (the system's temporary folder when None); it needs
         about 32 bytes per point and buffered tile, plus 9 bytes per point.
+    denoise : {"statistical", "radius"}, outlier filter or None, default=None
+        Outlier removal before everything else:
+        :class:`~skpcd.preprocessing.StatisticalOutlierFilter` or
+        :class:`~skpcd.preprocessing.RadiusOutlierFilter` with their
+        defaults, or a filter of your own (cloned; its ``fit_predict``
+        gives -1 for an outlier). The outliers are labelled -1 and are not
+        ground; the other steps see the inliers only. Not with
+        ``tile_size`` (a ValueError): filter the scan beforehand.
 
     Returns
     -------
@@ -206,6 +225,11 @@ def segment_scene(
     >>> seg.n_segments, int(seg.ground.sum()), np.bincount(seg.labels[9000:]).tolist()
     (2, 9000, [800, 800])
     """
+    if denoise is not None and tile_size is not None:
+        raise ValueError(
+            "denoise is not available with tile_size; remove the outliers "
+            "from the scan beforehand"
+        )
     filt = None
     if ground is not None:
         filt = (
@@ -240,6 +264,38 @@ def segment_scene(
 
         points = read_point_cloud(points)
     xyz = check_scene(points)
+    if denoise is not None:
+        from skpcd.preprocessing import RadiusOutlierFilter, StatisticalOutlierFilter
+
+        if isinstance(denoise, str):
+            named = {
+                "statistical": StatisticalOutlierFilter,
+                "radius": RadiusOutlierFilter,
+            }
+            denoiser = named[denoise](n_jobs=n_jobs)
+        else:
+            denoiser = clone(denoise)
+        keep = np.flatnonzero(np.asarray(denoiser.fit_predict(xyz)) == 1)
+        seg = _segment_xyz(
+            np.ascontiguousarray(xyz[keep]), filt, method, eps, eps_scale,
+            min_samples, min_cluster_size, max_cluster_size, random_state, n_jobs,
+        )  # fmt: skip
+        labels = np.full(len(xyz), -1, dtype=np.int64)
+        labels[keep] = seg.labels
+        is_ground = np.zeros(len(xyz), dtype=bool)
+        is_ground[keep] = seg.ground
+        return SceneSegmentation(labels, is_ground, seg.eps)
+    return _segment_xyz(
+        xyz, filt, method, eps, eps_scale, min_samples, min_cluster_size,
+        max_cluster_size, random_state, n_jobs,
+    )  # fmt: skip
+
+
+def _segment_xyz(
+    xyz, filt, method, eps, eps_scale, min_samples, min_cluster_size,
+    max_cluster_size, random_state, n_jobs,
+):  # fmt: skip
+    """The in-memory segmentation of checked xyz (see segment_scene)."""
     if filt is None:
         is_ground = np.zeros(len(xyz), dtype=bool)
     else:

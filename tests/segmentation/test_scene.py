@@ -237,3 +237,25 @@ def test_point_order_invariance(scenes):
     np.testing.assert_array_equal(shuffled.ground, seg.ground[perm])
     # a border point tied between two clusters may go either way
     assert adjusted_rand_score(seg.labels[perm], shuffled.labels) > 0.999
+
+
+@pytest.mark.parametrize("denoise", ["statistical", "radius"])
+def test_denoise_removes_outliers_before_the_ground_filter(denoise):
+    from skpcd.preprocessing import StatisticalOutlierFilter
+
+    rng = np.random.default_rng(0)
+    floor = np.column_stack([rng.uniform(0, 30, (9000, 2)), np.zeros(9000)])
+    boxes = [rng.uniform([x, 5, 0.6], [x + 3, 8, 3], (800, 3)) for x in (5, 15)]
+    X = np.vstack([floor, *boxes, [[1e5, 1e5, 50.0]]])
+    plain = segment_scene(X)
+    seg = segment_scene(X, denoise=denoise)
+    assert seg.labels[-1] == -1 and not seg.ground[-1]
+    assert seg.n_segments == 2
+    if denoise == "statistical":
+        # only the far point is removed: the rest is the plain segmentation
+        assert np.array_equal(seg.labels[:-1], plain.labels[:-1])
+        assert np.array_equal(seg.ground[:-1], plain.ground[:-1])
+        own = segment_scene(X, denoise=StatisticalOutlierFilter(n_neighbors=8))
+        assert np.array_equal(own.labels, seg.labels)
+    with pytest.raises(ValueError, match="not available with tile_size"):
+        segment_scene(X, denoise=denoise, tile_size=50.0)
