@@ -1,0 +1,768 @@
+"""Ray casting against analytic primitives through a uniform grid (numba).
+
+All the kernels of the scan simulation live in this one module (numba's
+cache does not follow calls into other modules).
+
+The scene is packed arrays (see :mod:`skpcd.datasets._street._primitives`):
+``kind (m,)``, ``params (m, 24)``, ``hit (m,)`` and the axis-aligned bounding
+box of each primitive ``aabb (m, 6)``. A 2-D grid of square cells over
+``x, y`` lists, in CSR form, the primitives whose box overlaps each cell; a
+ray walks through the cells it crosses (Amanatides and Woo, 1987), tests
+the primitives of each cell once (a per-primitive mailbox holds the id of
+the last ray that tested it) and stops as soon as its nearest hit lies in
+the cell being left. The first hit along the ray is returned: what stands
+behind it is never seen.
+
+A primitive with hit probability ``p < 1`` (foliage, glass, mesh) is hit by
+a ray that crosses it with probability ``p`` and otherwise let through. The
+draw is a counter-based hash of the scan seed, the ray id and the primitive
+id, so a scan does not depend on the order in which the primitives are
+tested, on the chunking of the rays, or on threads.
+
+A scan pattern is an integer code with a float parameter vector ``fp``, a
+float table ``fa`` (one row per scanner, flight line, or the beams,
+flattened) and a table ``ft`` of the cosines and sines of the pattern's scan
+angles (so that no pulse computes a trigonometric function).
+``pulse_ray`` turns a pulse number ``k`` into the origin, direction, time
+and channel of its ray; ``simulate`` casts the pulses ``k0 .. k1 - 1`` and
+writes the returns. Rays are never stored: a scan of any size runs in
+chunks of constant memory.
+"""
+
+import math
+
+import numpy as np
+from numba import njit
+
+CYLINDER, BOX, ELLIPSOID, WALL, PROFILE = 0, 1, 2, 3, 4
+N_PARAMS = 32
+MAX_PROFILE_VERTICES = (N_PARAMS - 4) // 2
+
+# salts of the hash draws of one ray (the primitives use SALT_PRIM + id, the
+# glass of walls SALT_GLASS + id); SALT_NOISE's hash gives the four normal
+# numbers of the ray's jitter and range noise
+SALT_DROP = 8
+SALT_NOISE = 9
+SALT_GLASS = 1 << 40
+SALT_PRIM = 1 << 20
+
+_C1 = np.uint64(0x9E3779B97F4A7C15)
+_C2 = np.uint64(0xBF58476D1CE4E5B9)
+_C3 = np.uint64(0x94D049BB133111EB)
+_S11 = np.uint64(11)
+_S27 = np.uint64(27)
+_S30 = np.uint64(30)
+_S31 = np.uint64(31)
+_INV53 = 1.0 / 9007199254740992.0
+_EPS = 1e-12
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def hash64(seed, k, salt):
+    """A 64-bit hash of (seed, ray id, salt): the splitmix64 finaliser."""
+    z = np.uint64(seed) + np.uint64(k) * _C1 + np.uint64(salt) * _C3
+    z = (z ^ (z >> _S30)) * _C2
+    z = (z ^ (z >> _S27)) * _C3
+    return z ^ (z >> _S31)
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def uniform(seed, k, salt):
+    """A uniform number in [0, 1) from (seed, ray id, salt)."""
+    return np.float64(hash64(seed, k, salt) >> _S11) * _INV53
+
+
+# ---------------------------------------------------------------------------
+# intersections: the smallest t in (tmin, tmax) where the ray meets the
+# primitive's surface, or inf
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def hit_cylinder(params, i, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """Capped cone frustum ``i``: from ``p[0:3]`` (radius ``p[6]``) to ``p[3:6]``.
+
+    ``p = params[i]``: radius ``p[7]`` at the far end, ``p[8:11]`` the unit
+    axis and ``p[11]`` the length.
+    """
+    ax, ay, az, length = params[i, 8], params[i, 9], params[i, 10], params[i, 11]
+    r0, r1 = params[i, 6], params[i, 7]
+    wx, wy, wz = ox - params[i, 0], oy - params[i, 1], oz - params[i, 2]
+    da = dx * ax + dy * ay + dz * az
+    wa = wx * ax + wy * ay + wz * az
+    dpx, dpy, dpz = dx - da * ax, dy - da * ay, dz - da * az
+    wpx, wpy, wpz = wx - wa * ax, wy - wa * ay, wz - wa * az
+    k = (r1 - r0) / length
+    rr = r0 + k * wa
+    a = dpx * dpx + dpy * dpy + dpz * dpz - k * k * da * da
+    b = 2.0 * (wpx * dpx + wpy * dpy + wpz * dpz - k * rr * da)
+    c = wpx * wpx + wpy * wpy + wpz * wpz - rr * rr
+    best = np.inf
+    if abs(a) > _EPS:
+        disc = b * b - 4.0 * a * c
+        if disc >= 0.0:
+            sq = math.sqrt(disc)
+            t1 = (-b - sq) / (2.0 * a)
+            t2 = (-b + sq) / (2.0 * a)
+            if t1 > t2:
+                t1, t2 = t2, t1
+            if tmin < t1 < tmax:
+                h = wa + t1 * da
+                if 0.0 <= h <= length:
+                    best = t1
+            if best == np.inf and tmin < t2 < tmax:
+                h = wa + t2 * da
+                if 0.0 <= h <= length:
+                    best = t2
+    if abs(da) > _EPS:
+        t = -wa / da
+        if tmin < t < tmax and t < best:
+            qx, qy, qz = wpx + t * dpx, wpy + t * dpy, wpz + t * dpz
+            if qx * qx + qy * qy + qz * qz <= r0 * r0:
+                best = t
+        t = (length - wa) / da
+        if tmin < t < tmax and t < best:
+            qx, qy, qz = wpx + t * dpx, wpy + t * dpy, wpz + t * dpz
+            if qx * qx + qy * qy + qz * qz <= r1 * r1:
+                best = t
+    return best
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def to_local(params, i, ox, oy, oz, dx, dy, dz):
+    """Ray in the frame of a box or ellipsoid: centre p[0:3], axes p[6:15].
+
+    ``p[6 + 3 * j + i]`` is component j (world) of local axis i.
+    """
+    rx, ry, rz = ox - params[i, 0], oy - params[i, 1], oz - params[i, 2]
+    lox = params[i, 6] * rx + params[i, 9] * ry + params[i, 12] * rz
+    loy = params[i, 7] * rx + params[i, 10] * ry + params[i, 13] * rz
+    loz = params[i, 8] * rx + params[i, 11] * ry + params[i, 14] * rz
+    ldx = params[i, 6] * dx + params[i, 9] * dy + params[i, 12] * dz
+    ldy = params[i, 7] * dx + params[i, 10] * dy + params[i, 13] * dz
+    ldz = params[i, 8] * dx + params[i, 11] * dy + params[i, 14] * dz
+    return lox, loy, loz, ldx, ldy, ldz
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _slab(lo, ld, h, tn, tf, axis, side, this):
+    """One axis of the slab test; keeps the entry axis and face side."""
+    if abs(ld) < _EPS:
+        if lo < -h or lo > h:
+            return np.inf, -np.inf, axis, side
+        return tn, tf, axis, side
+    inv = 1.0 / ld
+    t1 = (-h - lo) * inv
+    t2 = (h - lo) * inv
+    s = -1
+    if t1 > t2:
+        t1, t2 = t2, t1
+        s = 1
+    if t1 > tn:
+        tn = t1
+        axis = this
+        side = s
+    if t2 < tf:
+        tf = t2
+    return tn, tf, axis, side
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def box_span(params, i, lox, loy, loz, ldx, ldy, ldz):
+    """Entry and exit of a ray in local box coordinates, with the entry face."""
+    tn, tf, axis, side = -np.inf, np.inf, -1, 0
+    tn, tf, axis, side = _slab(lox, ldx, params[i, 3], tn, tf, axis, side, 0)
+    tn, tf, axis, side = _slab(loy, ldy, params[i, 4], tn, tf, axis, side, 1)
+    tn, tf, axis, side = _slab(loz, ldz, params[i, 5], tn, tf, axis, side, 2)
+    return tn, tf, axis, side
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def hit_box(params, i, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """Oriented box: centre p[0:3], half extents p[3:6], axes p[6:15]."""
+    lox, loy, loz, ldx, ldy, ldz = to_local(params, i, ox, oy, oz, dx, dy, dz)
+    tn, tf, _, _ = box_span(params, i, lox, loy, loz, ldx, ldy, ldz)
+    if tn > tf:
+        return np.inf
+    if tmin < tn < tmax:
+        return tn
+    if tn <= tmin < tf < tmax:  # ray starting inside
+        return tf
+    return np.inf
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def hit_ellipsoid(params, i, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """Ellipsoid: centre p[0:3], semi-axes p[3:6], axes p[6:15]."""
+    lox, loy, loz, ldx, ldy, ldz = to_local(params, i, ox, oy, oz, dx, dy, dz)
+    lox, loy, loz = lox / params[i, 3], loy / params[i, 4], loz / params[i, 5]
+    ldx, ldy, ldz = ldx / params[i, 3], ldy / params[i, 4], ldz / params[i, 5]
+    a = ldx * ldx + ldy * ldy + ldz * ldz
+    b = 2.0 * (lox * ldx + loy * ldy + loz * ldz)
+    c = lox * lox + loy * loy + loz * loz - 1.0
+    disc = b * b - 4.0 * a * c
+    if disc < 0.0:
+        return np.inf
+    sq = math.sqrt(disc)
+    t1 = (-b - sq) / (2.0 * a)
+    if tmin < t1 < tmax:
+        return t1
+    t2 = (-b + sq) / (2.0 * a)
+    if tmin < t2 < tmax:
+        return t2
+    return np.inf
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def hit_wall(params, i, ox, oy, oz, dx, dy, dz, tmin, tmax, seed, ray):
+    """A box with a grid of window openings through it (a facade).
+
+    The box is ``hit_box``'s; its front face is the local ``-y`` face and
+    its thickness the depth of the window reveals. With ``p = params[i]``,
+    windows: columns of width ``p[17]`` from local x ``p[15]`` every
+    ``p[16]`` (``p[18]`` columns), rows of height ``p[21]`` from local z
+    ``p[19]`` every ``p[20]`` (``p[22]`` rows). A ray entering the front
+    face in an opening hits a reveal if it leaves the opening before the
+    back face, else the glass in the back face with probability ``p[23]``;
+    otherwise it passes into the building.
+    """
+    lox, loy, loz, ldx, ldy, ldz = to_local(params, i, ox, oy, oz, dx, dy, dz)
+    tn, tf, axis, side = box_span(params, i, lox, loy, loz, ldx, ldy, ldz)
+    if tn > tf or tn >= tmax or tf <= tmin:
+        return np.inf
+    if tn <= tmin:
+        return tf if tf < tmax else np.inf
+    if axis != 1 or side != -1:
+        return tn
+    x0, x_period, width, n_cols = (
+        params[i, 15],
+        params[i, 16],
+        params[i, 17],
+        params[i, 18],
+    )
+    z0, z_period, height, n_rows = (
+        params[i, 19],
+        params[i, 20],
+        params[i, 21],
+        params[i, 22],
+    )
+    x = lox + tn * ldx - x0
+    col = math.floor(x / x_period)
+    if not (0 <= col < n_cols and x - col * x_period < width):
+        return tn
+    z = loz + tn * ldz - z0
+    row = math.floor(z / z_period)
+    if not (0 <= row < n_rows and z - row * z_period < height):
+        return tn
+    xa = x0 + col * x_period
+    za = z0 + row * z_period
+    t_back = (params[i, 4] - loy) / ldy
+    t_side = np.inf
+    if ldx > _EPS:
+        t_side = (xa + width - lox) / ldx
+    elif ldx < -_EPS:
+        t_side = (xa - lox) / ldx
+    if ldz > _EPS:
+        t_side = min(t_side, (za + height - loz) / ldz)
+    elif ldz < -_EPS:
+        t_side = min(t_side, (za - loz) / ldz)
+    if t_side < t_back:  # a reveal
+        return t_side if t_side < tmax else np.inf
+    if t_back < tmax and uniform(seed, ray, SALT_GLASS + i) < params[i, 23]:
+        return t_back  # the glass
+    return np.inf
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def hit_profile(params, i, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """Terrain: a cross-section polyline in (y, z) extruded along x on a slope.
+
+    ``p = params[i]``: slope ``p[0]``, x range ``p[1], p[2]``, ``p[3]``
+    vertices ``(y, z)`` from ``p[4]`` on (heights at x = 0; vertical
+    segments are kerb faces). In ``(y, z - slope * x)`` the surface is the
+    polyline and the ray a 2-D line, so each segment is a 2-D crossing.
+    """
+    slope = params[i, 0]
+    w = oz - slope * ox
+    dw = dz - slope * dx
+    best = tmax
+    # which side of the ray's 2-D line each vertex lies on: a segment is
+    # crossed where the side changes (no division for the others)
+    n = int(params[i, 3])
+    ay, az = params[i, 4], params[i, 5]
+    sa = dy * (az - w) - dw * (ay - oy)
+    for v in range(1, n):
+        by, bz = params[i, 4 + 2 * v], params[i, 5 + 2 * v]
+        sb = dy * (bz - w) - dw * (by - oy)
+        if (sa <= 0.0) != (sb <= 0.0):
+            ey, ez = by - ay, bz - az
+            den = dy * ez - dw * ey
+            if abs(den) > _EPS:
+                t = ((ay - oy) * ez - (az - w) * ey) / den
+                if tmin < t < best:
+                    x = ox + t * dx
+                    if params[i, 1] <= x <= params[i, 2]:
+                        best = t
+        ay, az, sa = by, bz, sb
+    return best if best < tmax else np.inf
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def intersect(kind, params, i, ox, oy, oz, dx, dy, dz, tmin, tmax, seed, ray):
+    """Dispatch on the primitive kind."""
+    if kind == PROFILE:
+        return hit_profile(params, i, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    if kind == CYLINDER:
+        return hit_cylinder(params, i, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    if kind == BOX:
+        return hit_box(params, i, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    if kind == ELLIPSOID:
+        return hit_ellipsoid(params, i, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    return hit_wall(params, i, ox, oy, oz, dx, dy, dz, tmin, tmax, seed, ray)
+
+
+# ---------------------------------------------------------------------------
+# the grid
+
+
+@njit(cache=True, nogil=True)
+def grid_cells(aabb, in_grid, x0, y0, cell, nx, ny):
+    """CSR lists of the primitives whose bounding box overlaps each cell.
+
+    Only primitives with ``in_grid`` are listed. Returns ``start (nx * ny +
+    1,)``, ``items`` (primitive ids), ``boxes`` (a copy of the bounding box
+    of each listed item, in list order, so that a ray reads them in
+    sequence) and ``zrange (nx * ny, 2)``, the lowest and highest z of the
+    cell's items.
+    """
+    m = aabb.shape[0]
+    start = np.zeros(nx * ny + 1, dtype=np.int64)
+    for i in range(m):
+        if not in_grid[i]:
+            continue
+        ix0 = min(max(int((aabb[i, 0] - x0) / cell), 0), nx - 1)
+        ix1 = min(max(int((aabb[i, 3] - x0) / cell), 0), nx - 1)
+        iy0 = min(max(int((aabb[i, 1] - y0) / cell), 0), ny - 1)
+        iy1 = min(max(int((aabb[i, 4] - y0) / cell), 0), ny - 1)
+        for iy in range(iy0, iy1 + 1):
+            for ix in range(ix0, ix1 + 1):
+                start[iy * nx + ix + 1] += 1
+    for c in range(nx * ny):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    items = np.empty(start[-1], dtype=np.int64)
+    boxes = np.empty((start[-1], 6))
+    zrange = np.empty((nx * ny, 2))
+    zrange[:, 0] = np.inf
+    zrange[:, 1] = -np.inf
+    for i in range(m):
+        if not in_grid[i]:
+            continue
+        ix0 = min(max(int((aabb[i, 0] - x0) / cell), 0), nx - 1)
+        ix1 = min(max(int((aabb[i, 3] - x0) / cell), 0), nx - 1)
+        iy0 = min(max(int((aabb[i, 1] - y0) / cell), 0), ny - 1)
+        iy1 = min(max(int((aabb[i, 4] - y0) / cell), 0), ny - 1)
+        for iy in range(iy0, iy1 + 1):
+            for ix in range(ix0, ix1 + 1):
+                c = iy * nx + ix
+                items[fill[c]] = i
+                boxes[fill[c]] = aabb[i]
+                fill[c] += 1
+                zrange[c, 0] = min(zrange[c, 0], aabb[i, 2])
+                zrange[c, 1] = max(zrange[c, 1], aabb[i, 5])
+    return start, items, boxes, zrange
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _clip(o, d, lo, hi, t0, t1):
+    if abs(d) < _EPS:
+        if o < lo or o > hi:
+            return np.inf, -np.inf
+        return t0, t1
+    ta = (lo - o) / d
+    tb = (hi - o) / d
+    if ta > tb:
+        ta, tb = tb, ta
+    return max(t0, ta), min(t1, tb)
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _box_overlap(boxes, j, ox, oy, oz, ix, iy, iz, t0, t1):
+    """Does the ray (inverse direction ix, iy, iz) meet box j within [t0, t1]?"""
+    ta = (boxes[j, 0] - ox) * ix
+    tb = (boxes[j, 3] - ox) * ix
+    if ta > tb:
+        ta, tb = tb, ta
+    t0 = max(t0, ta)
+    t1 = min(t1, tb)
+    ta = (boxes[j, 1] - oy) * iy
+    tb = (boxes[j, 4] - oy) * iy
+    if ta > tb:
+        ta, tb = tb, ta
+    t0 = max(t0, ta)
+    t1 = min(t1, tb)
+    ta = (boxes[j, 2] - oz) * iz
+    tb = (boxes[j, 5] - oz) * iz
+    if ta > tb:
+        ta, tb = tb, ta
+    t0 = max(t0, ta)
+    t1 = min(t1, tb)
+    return t0 <= t1
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _box_exit(boxes, j, ox, oy, oz, ix, iy, iz, t0, t1):
+    """Where the ray leaves box j within [t0, t1], or -1 if it misses it."""
+    ta = (boxes[j, 0] - ox) * ix
+    tb = (boxes[j, 3] - ox) * ix
+    t0 = max(t0, min(ta, tb))
+    t1 = min(t1, max(ta, tb))
+    ta = (boxes[j, 1] - oy) * iy
+    tb = (boxes[j, 4] - oy) * iy
+    t0 = max(t0, min(ta, tb))
+    t1 = min(t1, max(ta, tb))
+    ta = (boxes[j, 2] - oz) * iz
+    tb = (boxes[j, 5] - oz) * iz
+    t0 = max(t0, min(ta, tb))
+    t1 = min(t1, max(ta, tb))
+    return t1 if t0 <= t1 else -1.0
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _try(kind, params, hit, i, ox, oy, oz, dx, dy, dz, tmin, best, seed, ray):
+    """Distance to primitive i if the ray is stopped by it before ``best``."""
+    t = intersect(kind[i], params, i, ox, oy, oz, dx, dy, dz, tmin, best, seed, ray)
+    if t < best:
+        h = hit[i]
+        if h < 1.0 and uniform(seed, ray, SALT_PRIM + i) >= h:
+            return np.inf
+    return t
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def cast(
+    ox,
+    oy,
+    oz,
+    dx,
+    dy,
+    dz,
+    tmin,
+    tmax,
+    kind,
+    params,
+    hit,
+    aabb,
+    glob,
+    bounds,
+    cell,
+    nx,
+    ny,
+    start,
+    items,
+    boxes,
+    zrange,
+    mailbox,
+    ray,
+    seed,
+):
+    """First primitive the ray meets in (tmin, tmax): ``(index, t)``, or (-1, inf).
+
+    The primitives ``glob`` (the ground profile and other large ones, met
+    by most rays) are tested first, which bounds the walk through the grid.
+    ``bounds`` is ``(x0, y0, z0, x1, y1, z1)`` of the grid (z: of all the
+    primitives); ``mailbox[i] == ray`` marks primitives already tested.
+    """
+    # inverse directions for the box tests (a huge number for a zero component)
+    ix = 1.0 / dx if abs(dx) > _EPS else 1e300 * (1.0 if dx >= 0 else -1.0)
+    iy = 1.0 / dy if abs(dy) > _EPS else 1e300 * (1.0 if dy >= 0 else -1.0)
+    iz = 1.0 / dz if abs(dz) > _EPS else 1e300 * (1.0 if dz >= 0 else -1.0)
+    best = tmax
+    best_i = -1
+    for g in range(glob.shape[0]):
+        i = glob[g]
+        if kind[i] == PROFILE or _box_overlap(
+            aabb, i, ox, oy, oz, ix, iy, iz, tmin, best
+        ):
+            t = _try(
+                kind, params, hit, i, ox, oy, oz, dx, dy, dz, tmin, best, seed, ray
+            )
+            if t < best:
+                best = t
+                best_i = i
+    t0, t1 = _clip(ox, dx, bounds[0], bounds[3], tmin, best)
+    t0, t1 = _clip(oy, dy, bounds[1], bounds[4], t0, t1)
+    t0, t1 = _clip(oz, dz, bounds[2], bounds[5], t0, t1)
+    if t0 > t1:
+        return best_i, best
+    x0, y0 = bounds[0], bounds[1]
+    px = ox + t0 * dx
+    py = oy + t0 * dy
+    cx = min(max(int((px - x0) / cell), 0), nx - 1)
+    cy = min(max(int((py - y0) / cell), 0), ny - 1)
+    if dx > _EPS:
+        sx, nxt_x, dtx = 1, (x0 + (cx + 1) * cell - ox) / dx, cell / dx
+    elif dx < -_EPS:
+        sx, nxt_x, dtx = -1, (x0 + cx * cell - ox) / dx, -cell / dx
+    else:
+        sx, nxt_x, dtx = 0, np.inf, np.inf
+    if dy > _EPS:
+        sy, nxt_y, dty = 1, (y0 + (cy + 1) * cell - oy) / dy, cell / dy
+    elif dy < -_EPS:
+        sy, nxt_y, dty = -1, (y0 + cy * cell - oy) / dy, -cell / dy
+    else:
+        sy, nxt_y, dty = 0, np.inf, np.inf
+    t_enter = t0
+    while True:
+        c = cy * nx + cx
+        t_exit = min(nxt_x, nxt_y)
+        # the ray's heights in the cell, against those of the cell's items
+        za = oz + t_enter * dz
+        zb = oz + min(t_exit, best) * dz
+        if max(za, zb) >= zrange[c, 0] and min(za, zb) <= zrange[c, 1]:
+            for j in range(start[c], start[c + 1]):
+                i = items[j]
+                if mailbox[i] == ray:
+                    continue
+                mailbox[i] = ray
+                if not _box_overlap(boxes, j, ox, oy, oz, ix, iy, iz, tmin, best):
+                    continue
+                t = _try(
+                    kind, params, hit, i, ox, oy, oz, dx, dy, dz, tmin, best, seed, ray
+                )
+                if t < best:
+                    best = t
+                    best_i = i
+        if best <= t_exit or t_exit >= t1:
+            break
+        t_enter = t_exit
+        if nxt_x < nxt_y:
+            cx += sx
+            if cx < 0 or cx >= nx:
+                break
+            nxt_x += dtx
+        else:
+            cy += sy
+            if cy < 0 or cy >= ny:
+                break
+            nxt_y += dty
+    return best_i, best
+
+
+# ---------------------------------------------------------------------------
+# scan patterns and the scan loop
+
+MOBILE, AERIAL, UGV = 0, 1, 2
+
+# fp of MOBILE: x_start, y_lane, z_lane_at_x0, slope, height, speed, rate,
+#   n_per_rotation, n_rotations, n_scanners, cos_blind
+# fa of MOBILE, one row of MOBILE_ROW per scanner: cos and sin of the azimuth
+#   of the scan plane from the heading, mount offsets (forward, left, up),
+#   time offset
+# ft of MOBILE: cos, sin of the angle of pulse j in the rotation (n_per x 2)
+MOBILE_ROW = 6
+# fp of AERIAL: altitude, speed, line_rate, tilt, n_passes
+# fa of AERIAL, one row of AERIAL_ROW per pass: y of the line, heading (+1,
+#   -1), x at the first line, first row of ft, (unused), pulses per line,
+#   number of lines, first pulse of the pass, time offset
+# ft of AERIAL: sin, cos of the scan angles of every pass, one after another
+AERIAL_ROW = 9
+# fp of UGV: x, y, z, n_azimuths, rate
+# fa of UGV: cos, sin of the beam elevations (n_beams x 2)
+# ft of UGV: cos, sin of the azimuths (n_azimuths x 2)
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def pulse_ray(code, fp, fa, ft, k):
+    """``(ok, ox, oy, oz, dx, dy, dz, time, channel)`` of pulse ``k``."""
+    if code == MOBILE:
+        n_per = int(fp[7])
+        per_scanner = n_per * int(fp[8])
+        s = k // per_scanner
+        rem = k - s * per_scanner
+        r = rem // n_per
+        j = rem - r * n_per
+        row = s * MOBILE_ROW
+        ca, sa = ft[2 * j], ft[2 * j + 1]
+        if -sa > fp[10]:  # inside the cone hidden by the vehicle
+            return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0
+        time = (r + j / n_per) / fp[6] + fa[row + 5]
+        slope = fp[3]
+        norm = math.sqrt(1.0 + slope * slope)
+        fx, fz = 1.0 / norm, slope / norm  # forward (pitched with the road)
+        ux, uz = -slope / norm, 1.0 / norm  # up
+        x = fp[0] + fp[5] * time
+        ox = x + fa[row + 2] * fx + fa[row + 4] * ux
+        oy = fp[1] + fa[row + 3]
+        oz = fp[2] + slope * x + fp[4] + fa[row + 2] * fz + fa[row + 4] * uz
+        cpsi, spsi = fa[row], fa[row + 1]
+        # in-plane horizontal direction h = cos(psi) forward + sin(psi) left
+        dx = ca * cpsi * fx + sa * ux
+        dy = ca * spsi
+        dz = ca * cpsi * fz + sa * uz
+        return True, ox, oy, oz, dx, dy, dz, time, s
+    if code == AERIAL:
+        n_pass = int(fp[4])
+        p = 0
+        for q in range(n_pass):
+            if k >= fa[q * AERIAL_ROW + 7]:
+                p = q
+        row = p * AERIAL_ROW
+        rem = k - int(fa[row + 7])
+        n_per = int(fa[row + 5])
+        line = rem // n_per
+        j = rem - line * n_per
+        heading = fa[row + 1]
+        t_line = line / fp[2]
+        sb, cb = ft[2 * (int(fa[row + 3]) + j)], ft[2 * (int(fa[row + 3]) + j) + 1]
+        ox = fa[row + 2] + heading * fp[1] * t_line
+        oy = fa[row + 0]
+        oz = fp[0]
+        ct = math.cos(fp[3])
+        dx = heading * math.sin(fp[3])
+        return True, ox, oy, oz, dx, sb * ct, -cb * ct, t_line + fa[row + 8], p
+    # UGV
+    nb = fa.shape[0] // 2
+    f = k // nb
+    b = k - f * nb
+    ce, se = fa[2 * b], fa[2 * b + 1]
+    time = f / (fp[3] * fp[4])
+    return True, fp[0], fp[1], fp[2], ce * ft[2 * f], ce * ft[2 * f + 1], se, time, b
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def _gauss(gauss, h, shift):
+    """A standard normal number: 16 bits of a hash index a table of quantiles."""
+    return gauss[(h >> np.uint64(shift)) & np.uint64(0xFFFF)]
+
+
+# _nrt=False: no reference counting of the arrays in the loop (the kernel
+# allocates nothing); it costs a third of the time otherwise
+@njit(cache=True, nogil=True, _nrt=False)
+def simulate(
+    code,
+    fp,
+    fa,
+    ft,
+    gauss,
+    k0,
+    k1,
+    seed,
+    min_range,
+    max_range,
+    noise,
+    divergence,
+    drop,
+    kind,
+    params,
+    hit,
+    aabb,
+    glob,
+    bounds,
+    cell,
+    nx,
+    ny,
+    start,
+    items,
+    boxes,
+    zrange,
+    mailbox,
+    interest,
+    out_xyz,
+    out_prim,
+    out_range,
+    out_time,
+    out_channel,
+):
+    """Cast pulses ``k0 .. k1 - 1``; returns the number of returns written.
+
+    Each ray's direction is jittered by ``divergence`` (standard deviation,
+    radians, per axis), its first hit within ``[min_range, max_range]`` kept
+    with probability ``1 - drop`` and its range perturbed by Gaussian
+    ``noise`` (metres) along the ray. ``gauss`` holds the standard normal
+    quantiles at ``(i + 0.5) / 65536``; one 64-bit hash per pulse gives the
+    four normal numbers of its jitter and noise.
+
+    A non-empty ``interest`` (boxes ``(m, 6)``) skips the rays that meet
+    none of these boxes within range and ends the others where they leave
+    the last box they cross: exact for whatever lies inside the boxes (the
+    objects :func:`~skpcd.datasets.make_street_objects` keeps).
+    """
+    n = 0
+    n_interest = interest.shape[0]
+    for k in range(k0, k1):
+        ok, ox, oy, oz, dx, dy, dz, time, channel = pulse_ray(code, fp, fa, ft, k)
+        if not ok:
+            continue
+        h = hash64(seed, k, SALT_NOISE)
+        if divergence > 0.0:
+            dx += divergence * _gauss(gauss, h, 0)
+            dy += divergence * _gauss(gauss, h, 16)
+            dz += divergence * _gauss(gauss, h, 32)
+            norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+            dx, dy, dz = dx / norm, dy / norm, dz / norm
+        t_end = max_range
+        if n_interest:
+            # the far end of the wanted boxes the ray crosses: no return
+            # beyond it is kept, so the walk stops there
+            ix = 1.0 / dx if abs(dx) > _EPS else 1e300
+            iy = 1.0 / dy if abs(dy) > _EPS else 1e300
+            iz = 1.0 / dz if abs(dz) > _EPS else 1e300
+            first = 0
+            while first < n_interest and (
+                _box_exit(interest, first, ox, oy, oz, ix, iy, iz, min_range, max_range)
+                < 0.0
+            ):
+                first += 1
+            if first == n_interest:
+                continue
+            t_end = -1.0
+            for b in range(first, n_interest):
+                t_end = max(
+                    t_end,
+                    _box_exit(
+                        interest, b, ox, oy, oz, ix, iy, iz, min_range, max_range
+                    ),
+                )
+            if t_end < 0.0:
+                continue
+        i, t = cast(
+            ox,
+            oy,
+            oz,
+            dx,
+            dy,
+            dz,
+            min_range,
+            t_end,
+            kind,
+            params,
+            hit,
+            aabb,
+            glob,
+            bounds,
+            cell,
+            nx,
+            ny,
+            start,
+            items,
+            boxes,
+            zrange,
+            mailbox,
+            k,
+            seed,
+        )
+        if i < 0:
+            continue
+        if drop > 0.0 and uniform(seed, k, SALT_DROP) < drop:
+            continue
+        if noise > 0.0:
+            t += noise * _gauss(gauss, h, 48)
+        out_xyz[n, 0] = ox + t * dx
+        out_xyz[n, 1] = oy + t * dy
+        out_xyz[n, 2] = oz + t * dz
+        out_prim[n] = i
+        out_range[n] = t
+        out_time[n] = time
+        out_channel[n] = channel
+        n += 1
+    return n

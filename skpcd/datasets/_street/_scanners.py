@@ -1,0 +1,378 @@
+"""Scan patterns: mobile profilers, an airborne swath, a spinning UGV sensor.
+
+``SCAN_PATTERNS`` holds the default numbers of each pattern;
+:func:`plan_scan` turns a pattern, its overrides and a street into the
+arrays of :mod:`skpcd.datasets._street._scanner_kernels`, and :func:`scan`
+casts every pulse against the packed scene, in chunks of constant memory.
+"""
+
+import math
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+from scipy.special import ndtri
+
+from skpcd.datasets._street._raycast import (
+    AERIAL,
+    MOBILE,
+    MOBILE_ROW,
+    PROFILE,
+    UGV,
+    grid_cells,
+    simulate,
+)
+
+__all__ = ["SCAN_PATTERNS", "plan_scan", "scan"]
+
+# HDL-32E vertical angles: 32 beams from -30.67 to +10.67 degrees, 1.33 apart
+_HDL32_ELEVATIONS = tuple(np.round(np.linspace(-30.67, 10.67, 32), 4).tolist())
+
+SCAN_PATTERNS = {
+    # Optech Lynx-like mobile mapping: two profilers on the vehicle roof whose
+    # vertical rotation planes stand at +-45 degrees to the driving direction
+    # (and so at right angles to each other), as in He et al. (2017).
+    "mobile": {
+        "speed": 10.0,  # m/s (36 km/h)
+        "rotation_rate": 200.0,  # rotations per second, each scanner
+        "angular_step": 0.1,  # degrees between pulses in the scan plane
+        "height": 2.2,  # scanner centres above the road, m
+        "plane_azimuths": (45.0, -45.0),  # scan planes from the heading, deg
+        "mount_offsets": ((-0.5, 0.35, 0.0), (-0.5, -0.35, 0.0)),  # fwd, left, up
+        "blind_angle": 40.0,  # half-angle of the cone below hidden by the car, deg
+        "lane": None,  # y of the trajectory; None: middle of the right lane
+        "min_range": 1.0,  # m
+        "max_range": 100.0,  # m
+        "range_noise": 0.008,  # m, standard deviation
+        "beam_divergence": 1.5e-4,  # rad, standard deviation of the ray jitter
+    },
+    # Airborne swath (DALES-like: Riegl Q1560 at 1300 m): straight parallel
+    # scan lines across track, several overlapping flight lines along the
+    # street flown in alternate directions.
+    "aerial": {
+        "altitude": 1300.0,  # m above the road at x = 0
+        "speed": 72.0,  # m/s
+        "density": 10.0,  # pulses per m2 at nadir, each flight line
+        "field_of_view": 58.0,  # full scan angle, deg
+        "line_offsets": (-250.0, 250.0, -80.0, 80.0),  # y of the flight lines, m
+        "tilt": 0.0,  # forward look of the scan plane, deg
+        "min_range": 10.0,
+        "max_range": 3000.0,
+        "range_noise": 0.02,
+        "beam_divergence": 1.25e-4,
+    },
+    # A spinning 32-beam sensor (HDL-32E-like vertical angles) on a small
+    # ground vehicle, one full sweep.
+    "ugv": {
+        "height": 1.8,  # m above the road
+        "position": None,  # (x, y); None: middle of the street, right lane
+        "elevations": _HDL32_ELEVATIONS,  # deg
+        "azimuth_step": 0.16,  # deg between firings (HDL-32E at 10 Hz)
+        "rotation_rate": 10.0,  # Hz
+        "min_range": 1.0,
+        "max_range": 100.0,
+        "range_noise": 0.02,
+        "beam_divergence": 1.0e-3,
+    },
+}
+
+
+def resolve_pattern(scanner, scanner_params=None, **overrides):
+    """The pattern's numbers: defaults, then ``scanner_params``, then overrides.
+
+    ``overrides`` with a None value are ignored.
+    """
+    if scanner not in SCAN_PATTERNS:
+        raise ValueError(
+            f"scanner must be one of {sorted(SCAN_PATTERNS)}, got {scanner!r}"
+        )
+    conf = dict(SCAN_PATTERNS[scanner])
+    given = dict(scanner_params or {})
+    given.update({k: v for k, v in overrides.items() if v is not None})
+    for key, value in given.items():
+        if key not in conf:
+            raise ValueError(
+                f"unknown parameter {key!r} of the {scanner!r} scan pattern; "
+                f"known: {sorted(conf)}"
+            )
+        conf[key] = value
+    for key in ("min_range", "max_range", "range_noise", "beam_divergence"):
+        if not float(conf[key]) >= 0:
+            raise ValueError(f"{key} must be non-negative, got {conf[key]}")
+    if not float(conf["max_range"]) > float(conf["min_range"]):
+        raise ValueError("max_range must be larger than min_range")
+    return conf
+
+
+def _mobile(conf, street):
+    lane = street.right_lane if conf["lane"] is None else float(conf["lane"])
+    azim = np.atleast_1d(np.asarray(conf["plane_azimuths"], dtype=float))
+    mounts = np.asarray(conf["mount_offsets"], dtype=float).reshape(-1, 3)
+    if len(mounts) < len(azim):
+        mounts = np.vstack([mounts, np.zeros((len(azim) - len(mounts), 3))])
+    rate, speed = float(conf["rotation_rate"]), float(conf["speed"])
+    n_per = round(360.0 / float(conf["angular_step"]))
+    if not (rate > 0 and speed > 0 and n_per >= 8):
+        raise ValueError("rotation_rate, speed and angular_step must be positive")
+    x_start, x_end = street.drive
+    duration = (x_end - x_start) / speed
+    n_rot = max(1, math.ceil(duration * rate))
+    fa = np.zeros(len(azim) * MOBILE_ROW)
+    for s, (psi, mount) in enumerate(zip(azim, mounts)):
+        # the scanners fire half a step apart, so their pulses do not coincide
+        psi = np.deg2rad(psi)
+        fa[s * MOBILE_ROW : (s + 1) * MOBILE_ROW] = [
+            np.cos(psi),
+            np.sin(psi),
+            *mount,
+            s * 0.5 / (n_per * rate),
+        ]
+    alpha = 2 * np.pi * np.arange(n_per) / n_per
+    ft = np.column_stack([np.cos(alpha), np.sin(alpha)]).ravel()
+    z0 = street.ground_height(0.0, lane) if np.isfinite(lane) else 0.0
+    fp = np.array(
+        [
+            x_start,
+            lane,
+            float(z0),
+            street.slope,
+            float(conf["height"]),
+            speed,
+            rate,
+            n_per,
+            n_rot,
+            len(azim),
+            math.cos(np.deg2rad(conf["blind_angle"])),
+        ]
+    )
+    x = x_start + speed * np.arange(n_rot) / rate
+    trajectory = np.column_stack(
+        [x, np.full(n_rot, lane), z0 + street.slope * x + conf["height"]]
+    )
+    return MOBILE, fp, fa, ft, len(azim) * n_per * n_rot, trajectory
+
+
+def _aerial(conf, street):
+    spacing = 1.0 / math.sqrt(float(conf["density"]))
+    speed, alt = float(conf["speed"]), float(conf["altitude"])
+    line_rate = speed / spacing
+    step = spacing / alt
+    half_fov = np.deg2rad(conf["field_of_view"]) / 2
+    x0, y0, x1, y1 = street.extent
+    top = street.top + 5.0
+    rows, traj, tables, first, n_ft = [], [], [], 0, 0
+    offsets = np.atleast_1d(np.asarray(conf["line_offsets"], dtype=float))
+    for p, y_line in enumerate(offsets):
+        heading = 1.0 if p % 2 == 0 else -1.0
+        # scan angles whose rays can reach the street: its ground, and the
+        # tops of its tallest objects seen from the line
+        lo = min(math.atan2(y0 - y_line, alt), math.atan2(y0 - y_line, alt - top))
+        hi = max(math.atan2(y1 - y_line, alt), math.atan2(y1 - y_line, alt - top))
+        lo, hi = max(lo, -half_fov), min(hi, half_fov)
+        if hi <= lo:
+            continue
+        n_per = math.ceil((hi - lo) / step) + 1
+        tilt_shift = alt * math.tan(np.deg2rad(conf["tilt"]))
+        xs = (x0 if heading > 0 else x1) - heading * tilt_shift
+        n_lines = math.ceil((x1 - x0) / (speed / line_rate)) + 1
+        rows.append([y_line, heading, xs, n_ft, step, n_per, n_lines, first, 0.0])
+        beta = lo + step * np.arange(n_per)
+        tables.append(np.column_stack([np.sin(beta), np.cos(beta)]).ravel())
+        n_ft += n_per
+        lines = np.arange(n_lines) / line_rate
+        traj.append(
+            np.column_stack(
+                [
+                    xs + heading * speed * lines,
+                    np.full(n_lines, y_line),
+                    np.full(n_lines, alt),
+                ]
+            )
+        )
+        first += n_per * n_lines
+    if not rows:
+        raise ValueError("no flight line sees the street: check line_offsets")
+    for i, row in enumerate(rows):  # flight lines one after the other, 10 min apart
+        row[8] = 600.0 * i
+    fa = np.asarray(rows, dtype=float).ravel()
+    fp = np.array([alt, speed, line_rate, np.deg2rad(conf["tilt"]), len(rows)])
+    return AERIAL, fp, fa, np.concatenate(tables), first, np.vstack(traj)
+
+
+def _ugv(conf, street):
+    if conf["position"] is None:
+        x, y = street.length / 2, street.right_lane
+    else:
+        x, y = map(float, conf["position"])
+    z = street.ground_height(x, y) + float(conf["height"])
+    n_az = round(360.0 / float(conf["azimuth_step"]))
+    fp = np.array([x, y, float(z), n_az, float(conf["rotation_rate"])])
+    el = np.deg2rad(np.asarray(conf["elevations"], dtype=float))
+    fa = np.column_stack([np.cos(el), np.sin(el)]).ravel()
+    az = 2 * np.pi * np.arange(n_az) / n_az
+    ft = np.column_stack([np.cos(az), np.sin(az)]).ravel()
+    return UGV, fp, fa, ft, n_az * len(el), np.array([[x, y, float(z)]])
+
+
+# standard normal quantiles at (i + 0.5) / 65536: 16 bits of a hash index them
+_GAUSS = ndtri((np.arange(1 << 16) + 0.5) / (1 << 16))
+
+_PLANNERS = {"mobile": _mobile, "aerial": _aerial, "ugv": _ugv}
+
+
+def plan_scan(scanner, conf, street):
+    """Kernel arrays of a pattern over a street.
+
+    ``street`` has ``length``, ``slope``, ``right_lane``, ``drive`` (x range
+    of a mobile survey), ``extent`` (x0, y0, x1, y1 of the scene), ``top``
+    (highest z) and ``ground_height(x, y)``.
+    Returns a dict with ``code, fp, fa, ft, n_pulses, trajectory``.
+    """
+    code, fp, fa, ft, n, traj = _PLANNERS[scanner](conf, street)
+    return {
+        "code": code,
+        "fp": np.ascontiguousarray(fp, dtype=np.float64),
+        "fa": np.ascontiguousarray(fa, dtype=np.float64),
+        "ft": np.ascontiguousarray(ft, dtype=np.float64),
+        "n_pulses": int(n),
+        "trajectory": np.ascontiguousarray(traj, dtype=np.float64),
+    }
+
+
+def build_grid(scene, cell=1.0, global_cells=400):
+    """Uniform grid over the scene's primitives: a dict of kernel arrays.
+
+    The terrain profile and primitives covering more than ``global_cells``
+    cells are not listed in the cells: every ray tests them first.
+    """
+    aabb = scene["aabb"]
+    lo, hi = aabb[:, :3].min(axis=0) - 0.01, aabb[:, 3:].max(axis=0) + 0.01
+    nx = max(1, math.ceil((hi[0] - lo[0]) / cell))
+    ny = max(1, math.ceil((hi[1] - lo[1]) / cell))
+    bounds = np.array(
+        [lo[0], lo[1], lo[2], lo[0] + nx * cell, lo[1] + ny * cell, hi[2]]
+    )
+    area = np.prod(aabb[:, 3:5] - aabb[:, 0:2] + cell, axis=1) / cell**2
+    is_global = (area > global_cells) | (scene["kind"] == PROFILE)
+    start, items, boxes, zrange = grid_cells(
+        aabb, ~is_global, bounds[0], bounds[1], float(cell), nx, ny
+    )
+    return {
+        "glob": np.flatnonzero(is_global).astype(np.int64),
+        "bounds": bounds,
+        "cell": float(cell),
+        "nx": nx,
+        "ny": ny,
+        "start": start,
+        "items": items,
+        "boxes": boxes,
+        "zrange": zrange,
+    }
+
+
+class _Buffers:
+    """Output arrays of one thread, reused from chunk to chunk."""
+
+    def __init__(self, n, n_prims):
+        self.xyz = np.empty((n, 3))
+        self.prim = np.empty(n, dtype=np.int64)
+        self.range = np.empty(n)
+        self.time = np.empty(n)
+        self.channel = np.empty(n, dtype=np.int64)
+        self.mailbox = np.full(n_prims, -1, dtype=np.int64)
+
+
+def _chunks(plan, conf, scene, grid, seed, drop, interest, spans, chunk):
+    """Cast the pulses of the ``(k0, k1)`` spans one after the other."""
+    buf = _Buffers(chunk, len(scene["kind"]))
+    out = []
+    for k0, k1 in spans:
+        m = simulate(
+            plan["code"],
+            plan["fp"],
+            plan["fa"],
+            plan["ft"],
+            _GAUSS,
+            k0,
+            k1,
+            seed,
+            float(conf["min_range"]),
+            float(conf["max_range"]),
+            float(conf["range_noise"]),
+            float(conf["beam_divergence"]),
+            float(drop),
+            scene["kind"],
+            scene["params"],
+            scene["hit"],
+            scene["aabb"],
+            grid["glob"],
+            grid["bounds"],
+            grid["cell"],
+            grid["nx"],
+            grid["ny"],
+            grid["start"],
+            grid["items"],
+            grid["boxes"],
+            grid["zrange"],
+            buf.mailbox,
+            interest,
+            buf.xyz,
+            buf.prim,
+            buf.range,
+            buf.time,
+            buf.channel,
+        )
+        out.append(
+            (
+                buf.xyz[:m].copy(),
+                buf.prim[:m].copy(),
+                buf.range[:m].copy(),
+                buf.time[:m].copy(),
+                buf.channel[:m].copy(),
+            )
+        )
+    return out
+
+
+def scan(
+    plan,
+    conf,
+    scene,
+    grid,
+    seed,
+    *,
+    drop=0.0,
+    interest=None,
+    chunk=1 << 18,
+    n_jobs=None,
+):
+    """Cast every pulse of the plan: ``xyz, primitive, range, time, channel``.
+
+    ``interest``: boxes ``(m, 6)``; rays meeting none of them are not cast.
+
+    Chunks of pulses run on ``n_jobs`` threads (the kernel releases the
+    GIL), each thread with its own output buffers; the output does not
+    depend on the chunking or the threads.
+    """
+    n = plan["n_pulses"]
+    spans = [(k, min(k + chunk, n)) for k in range(0, n, chunk)] or [(0, 0)]
+    workers = 1 if n_jobs is None else int(n_jobs)
+    if workers < 0:
+        workers = max(1, (os.cpu_count() or 1) + 1 + workers)
+    workers = max(1, min(workers, len(spans)))
+    # contiguous runs of chunks per thread keep the output in pulse order
+    runs = [list(r) for r in np.array_split(np.arange(len(spans)), workers)]
+    if interest is None:
+        interest = np.empty((0, 6))
+    interest = np.ascontiguousarray(interest, dtype=np.float64)
+    args = (plan, conf, scene, grid, seed, drop, interest)
+    if workers > 1:
+        with ThreadPoolExecutor(workers) as pool:
+            futures = [
+                pool.submit(_chunks, *args, [spans[i] for i in r], chunk) for r in runs
+            ]
+            parts = [p for f in futures for p in f.result()]
+    else:
+        parts = _chunks(*args, spans, chunk)
+    xyz, prim, rng, time, channel = (np.concatenate(a) for a in zip(*parts))
+    return xyz, prim, rng, time, channel
