@@ -327,9 +327,21 @@ def _natural(plan):
             for _ in range(rng.poisson(L / 8)):
                 plan.place("fence", side, strip="edge")
         if st.parking[side] > 0:
-            for _ in range(int(L / 5.5)):
-                if rng.random() < 0.7:
-                    plan.place("car", side, tries=2)
+            _park(plan, side, 0.75)
+
+
+def _park(plan, side, occupancy):
+    """Cars parked one behind the other along a parking lane, with gaps."""
+    rng = plan.rng
+    x = _u(rng, 0.5, 4.0)
+    while x < plan.street.length - 2.0:
+        if rng.random() < occupancy:
+            built = BUILDERS["car"](rng)
+            length = built[1]["length"]
+            plan.place("car", side, x + length / 2 + 0.2, tries=1, built=built)
+            x += length + _u(rng, 0.6, 2.5)
+        else:
+            x += _u(rng, 4.0, 10.0)
 
 
 def _utility_pole(rng):
@@ -365,9 +377,7 @@ def _requested(plan, wanted):
     # background: parked cars that were not asked for
     for side in (0, 1):
         if st.parking[side] > 0 and "car" not in wanted:
-            for _ in range(int(st.length / 8)):
-                if rng.random() < 0.5:
-                    plan.place("car", side, tries=2)
+            _park(plan, side, 0.5)
 
 
 def furnish(street, rng, wanted=None):

@@ -766,3 +766,63 @@ def simulate(
         out_channel[n] = channel
         n += 1
     return n
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def cast_rays(
+    origins,
+    directions,
+    tmin,
+    tmax,
+    seed,
+    kind,
+    params,
+    hit,
+    aabb,
+    glob,
+    bounds,
+    cell,
+    nx,
+    ny,
+    start,
+    items,
+    boxes,
+    zrange,
+    mailbox,
+    out_prim,
+    out_t,
+):
+    """First hit of each given ray (unit directions): primitive and distance.
+
+    Ray ``r`` has id ``r`` for the hit-probability draws; ``out_prim`` is -1
+    and ``out_t`` inf where nothing is hit within ``(tmin, tmax)``.
+    """
+    for r in range(origins.shape[0]):
+        i, t = cast(
+            origins[r, 0],
+            origins[r, 1],
+            origins[r, 2],
+            directions[r, 0],
+            directions[r, 1],
+            directions[r, 2],
+            tmin,
+            tmax,
+            kind,
+            params,
+            hit,
+            aabb,
+            glob,
+            bounds,
+            cell,
+            nx,
+            ny,
+            start,
+            items,
+            boxes,
+            zrange,
+            mailbox,
+            r,
+            seed,
+        )
+        out_prim[r] = i
+        out_t[r] = t if i >= 0 else np.inf

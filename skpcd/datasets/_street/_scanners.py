@@ -19,11 +19,12 @@ from skpcd.datasets._street._raycast import (
     MOBILE_ROW,
     PROFILE,
     UGV,
+    cast_rays,
     grid_cells,
     simulate,
 )
 
-__all__ = ["SCAN_PATTERNS", "plan_scan", "scan"]
+__all__ = ["SCAN_PATTERNS", "build_grid", "first_hits", "plan_scan", "scan"]
 
 # HDL-32E vertical angles: 32 beams from -30.67 to +10.67 degrees, 1.33 apart
 _HDL32_ELEVATIONS = tuple(np.round(np.linspace(-30.67, 10.67, 32), 4).tolist())
@@ -376,3 +377,41 @@ def scan(
         parts = _chunks(*args, spans, chunk)
     xyz, prim, rng, time, channel = (np.concatenate(a) for a in zip(*parts))
     return xyz, prim, rng, time, channel
+
+
+def first_hits(scene, origins, directions, *, tmin=0.0, tmax=np.inf, seed=0, grid=None):
+    """First primitive hit by each ray, and its distance (for tests and tools).
+
+    ``origins`` and ``directions`` are ``(n, 3)``; directions are
+    normalised here. Returns ``(primitive, t)``: -1 and inf for a miss.
+    """
+    origins = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    d = np.ascontiguousarray(d / np.linalg.norm(d, axis=1, keepdims=True))
+    grid = build_grid(scene) if grid is None else grid
+    prim = np.empty(len(origins), dtype=np.int64)
+    t = np.empty(len(origins))
+    cast_rays(
+        origins,
+        d,
+        float(tmin),
+        float(min(tmax, 1e30)),
+        int(seed),
+        scene["kind"],
+        scene["params"],
+        scene["hit"],
+        scene["aabb"],
+        grid["glob"],
+        grid["bounds"],
+        grid["cell"],
+        grid["nx"],
+        grid["ny"],
+        grid["start"],
+        grid["items"],
+        grid["boxes"],
+        grid["zrange"],
+        np.full(len(scene["kind"]), -1, dtype=np.int64),
+        prim,
+        t,
+    )
+    return prim, t
