@@ -15,6 +15,7 @@ from skpcd.utils._validation import (
     NORMALS_OPTIONS,
     _check_given_normals,
     _has_normal_columns,
+    local_frame,
 )
 
 __all__ = ["ImprovedPFHTransformer"]
@@ -107,7 +108,15 @@ class ImprovedPFHTransformer(CloudTransformer):
 
     *Points.* Points without a normal (an undefined estimate, or a given
     normal with a NaN) are left out; the histogram is normalised over the
-    others.
+    others. The farthest point lies on the line of ``n_m``: its pair is
+    degenerate by construction and binned as PCL bins a degenerate pair,
+    (0, 0, 0), not by float rounding.
+
+    *Position.* Each segment is computed relative to its lower corner (the
+    minimum of each coordinate, subtracted in float64 before the float32
+    pair features), so the descriptor does not depend on where the segment
+    lies: an exact translate gives the same row bit for bit, UTM coordinates
+    included.
 
     References
     ----------
@@ -236,7 +245,7 @@ class ImprovedPFHTransformer(CloudTransformer):
         if all(given):  # no search
             xyz = np.vstack([c[:, :3] for c in clouds]).astype(np.float64)
             n = np.vstack([c[:, 3:6] for c in clouds]).astype(np.float32)
-            p = xyz.astype(np.float32)
+            p, _ = local_frame(xyz, offsets, keep_within=0)
         else:
             k = self.n_neighbors
             if k is None and self.radius is None:
@@ -245,11 +254,14 @@ class ImprovedPFHTransformer(CloudTransformer):
                 clouds, n_neighbors=k, radius=self.radius, n_jobs=n_jobs,
                 with_sqdist=False,
             )  # fmt: skip
-            p = xyz.astype(np.float32)
-            n = _normals_f32(p, nb, np.zeros(3), n_jobs)[0]
+            # no PCL rounding to keep: every axis relative to the minimum
+            p, _ = local_frame(xyz, offsets, keep_within=0)
+            n = _normals_f32(p, nb, np.zeros(3), n_jobs)[0]  # signs unused
             del nb
             for i in np.flatnonzero(given):  # "auto" on a mixed batch
                 n[offsets[i] : offsets[i + 1]] = clouds[i][:, 3:6]
+        # the middle and farthest points in the same frames, in float64
+        xyz, _ = local_frame(xyz, offsets, dtype=np.float64, keep_within=0)
         n_bins, mode = self._bins(), 0 if self.variant == "pfh" else 1
         out = np.zeros((len(clouds), self._width()))
         middle = MIDDLES.index(self.middle)

@@ -9,6 +9,11 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
 from skpcd.utils._parallel import map_batches
+from skpcd.utils._validation import check_extents
+
+# Extents up to this keep every size finite in float64 (a volume is the
+# product of three sides, an area of two): larger ones are refused.
+MAX_SIZE_EXTENT = 1e100
 
 __all__ = ["OverallDescriptor", "box_dimensions"]
 
@@ -44,17 +49,43 @@ def box_dimensions(xyz, box="aabb"):
     -------
     length, width, height : float
         The horizontal sides, ``length >= width``, and the vertical extent.
+
+    Notes
+    -----
+    Computed relative to the box's lower corner, in float64, so that the
+    sides do not depend on where the segment lies; the principal axes of
+    ``"obb_xy"`` come from the coordinates scaled to at most 1, so that no
+    extent overflows the covariance.
     """
     xyz = np.asarray(xyz, dtype=np.float64)
-    if box == "aabb":
-        ext = np.ptp(xyz[:, :2], axis=0)
-    elif box == "obb_xy":
-        xy = xyz[:, :2] - xyz[:, :2].mean(axis=0)
-        _, vec = np.linalg.eigh(xy.T @ xy)
-        ext = np.ptp(xy @ vec, axis=0)
-    else:
+    if box not in ("aabb", "obb_xy"):
         raise ValueError(f'box must be "aabb" or "obb_xy", got {box!r}')
-    return float(ext.max()), float(ext.min()), float(np.ptp(xyz[:, 2]))
+    xyz = xyz[:, :3] - xyz[:, :3].min(axis=0)
+    if box == "aabb":
+        ext = xyz[:, :2].max(axis=0)
+    else:
+        xy = xyz[:, :2] - xyz[:, :2].mean(axis=0)
+        scale = np.abs(xy).max()
+        if scale > 0:
+            u = xy / scale
+            _, vec = np.linalg.eigh(u.T @ u)
+            ext = np.ptp(xy @ vec, axis=0)
+        else:
+            ext = np.zeros(2)
+    return float(ext.max()), float(ext.min()), float(xyz[:, 2].max())
+
+
+def _check_size_extents(clouds, input_name="X"):
+    """Refuse clouds whose sizes (area, volume) would overflow float64."""
+    lo = np.array([c[:, :3].min(axis=0) for c in clouds], dtype=np.float64)
+    hi = np.array([c[:, :3].max(axis=0) for c in clouds], dtype=np.float64)
+    check_extents(
+        lo.reshape(-1, 3),
+        hi.reshape(-1, 3),
+        MAX_SIZE_EXTENT,
+        input_name=input_name,
+        what="its box volume and shape features (float64)",
+    )
 
 
 class OverallDescriptor(CloudTransformer):
@@ -95,7 +126,10 @@ class OverallDescriptor(CloudTransformer):
     max(height, m)`` with ``m = min_extent``, and ``density = n_points /
     volume``. The extent columns depend on where the segment is; drop them
     (or use a :class:`~sklearn.compose.ColumnTransformer`) when only its
-    shape should matter.
+    shape should matter. The other columns are computed relative to the
+    segment's lower corner, in float64: they do not depend on where it lies
+    (UTM coordinates included). A segment spanning more than 1e100 along an
+    axis, whose volume would overflow, is a ValueError.
 
     Examples
     --------
@@ -129,6 +163,7 @@ class OverallDescriptor(CloudTransformer):
             Columns named by :meth:`get_feature_names_out`.
         """
         clouds = check_point_clouds(X)
+        _check_size_extents(clouds)
         return map_batches(self._transform_batch, clouds)
 
     def _transform_batch(self, clouds, n_jobs):

@@ -32,6 +32,10 @@ from skpcd.utils._validation import (
     _check_given_normals,
     _check_unit_normals,
     _has_normal_columns,
+    check_extents,
+    cloud_bounds,
+    local_frame,
+    max_extent,
 )
 
 __all__ = ["FPFHTransformer", "PFHTransformer", "compute_fpfh", "compute_pfh"]
@@ -40,7 +44,9 @@ FPFH_CONVENTIONS = ("pcl", "open3d", "paper")
 
 
 def _as_f32(points, normals, neighborhoods):
-    p = np.ascontiguousarray(np.asarray(points)[:, :3], dtype=np.float32)
+    """The cloud in its local frame (float32) and the normals, checked."""
+    xyz = np.ascontiguousarray(np.asarray(points)[:, :3], dtype=np.float64)
+    p, _ = local_frame(xyz, np.array([0, len(xyz)]), input_name="points")
     n = np.ascontiguousarray(normals, dtype=np.float32)
     if n.shape != p.shape:
         raise ValueError(f"normals must have shape {p.shape}, got {n.shape}")
@@ -78,7 +84,9 @@ def compute_pfh(
     Parameters
     ----------
     points : array-like of shape (n_points, 3+)
-        The cloud (float32 precision is used, as in PCL).
+        The cloud (float32 precision is used, as in PCL; an axis reaching
+        beyond 1024 from the origin is first taken relative to the cloud's
+        minimum, see the user guide).
     normals : array-like of shape (n_points, 3)
         Unit normals, used as given (PCL ``setInputNormals``): a norm more
         than 1e-3 away from 1 is an error. A row with a NaN is an undefined
@@ -102,15 +110,17 @@ def compute_pfh(
     ------
     ValueError
         If ``normals`` has another shape than the points, or a row without
-        NaN that is not a unit vector.
+        NaN that is not a unit vector, or the cloud spans more than float32
+        squared distances can hold (about 1e19).
     """
     nb = _neighborhoods(points, neighborhoods, n_neighbors, radius, n_jobs)
     p, n = _as_f32(points, normals, nb)
     return _pfh_packed(p, n, nb, int(n_bins), n_jobs)
 
 
-def _pfh_packed(p, n, nb, n_bins, n_jobs):
-    """PFH kernel over float32 packed arrays."""
+def _pfh_packed(p, n, nb, n_bins, n_jobs, cloud_ptr=None):
+    """PFH kernel over float32 packed arrays (clouds at ``cloud_ptr``, in
+    their local frames)."""
     from skpcd.features._pfh_kernels import ROW_MIN, pfh_rows
 
     out = _zeros((len(p), n_bins**3), np.float32)
@@ -118,7 +128,10 @@ def _pfh_packed(p, n, nb, n_bins, n_jobs):
     if len(p) and len(nb.indices) >= ROW_MIN * len(p) and n_bins**3 < 2**15:
         # large neighbourhoods: visited in space order, consecutive ones
         # share most of their pairs (pfh_rows_reuse)
-        rows = _space_order(p, _radius_of(p, nb))
+        cloud = None
+        if cloud_ptr is not None and len(cloud_ptr) > 2:
+            cloud = np.repeat(np.arange(len(cloud_ptr) - 1), np.diff(cloud_ptr))
+        rows = _space_order(p, _radius_of(p, nb), cloud)
         sorted_nb = (np.empty((0, 3)), np.empty(0, np.int32))
         rows = (rows, np.empty(0, np.int64), *sorted_nb)
         _pfh_reuse(*rows, *args, n_jobs, _pos_pool(p, n_jobs))
@@ -194,15 +207,18 @@ def _radius_of(p, nb):
     return float(np.median(np.sqrt((last.astype(np.float64) ** 2).sum(1))))
 
 
-def _space_order(p, radius):
+def _space_order(p, radius, cloud=None):
     """The points in a snake order over cells a quarter of ``radius`` wide:
-    x, then y up and down, then z."""
+    x, then y up and down, then z; cloud by cloud with ``cloud`` (each
+    point's cloud: clouds in their local frames overlap)."""
     h = 0.25 * radius
     if not h > 0 or len(p) == 0:
         return np.arange(len(p))
     c = np.floor((p - p.min(axis=0)) / np.float32(h)).astype(np.int64)
     snake = np.where(c[:, 0] % 2 == 0, c[:, 1], -c[:, 1])
-    return np.lexsort((c[:, 2], snake, c[:, 0]))
+    if cloud is None:
+        return np.lexsort((c[:, 2], snake, c[:, 0]))
+    return np.lexsort((c[:, 2], snake, c[:, 0], cloud))
 
 
 # Points per block of the blocked radius PFH (at least; 1/64 of the input
@@ -233,10 +249,17 @@ def _pfh_radius_blocked(clouds, radius, n_bins, given, viewpoint, n_jobs):
     np.cumsum([len(c) for c in clouds], out=offsets[1:])
     xyz = np.ascontiguousarray(np.vstack([c[:, :3] for c in clouds]), dtype=np.float64)
     n_pts = len(xyz)
-    origin, h, dims = grid_shape(xyz, offsets, np.full(len(clouds), radius))
+    lo_hi = cloud_bounds(xyz, offsets)
+    check_extents(
+        *lo_hi,
+        max_extent(np.float64),
+        what="squared distances in float64 (the neighbour search)",
+    )
+    origin, h, dims = grid_shape(xyz, offsets, np.full(len(clouds), radius), lo_hi)
     order, cells = build_grid(xyz, offsets, origin, h, dims)
     xs = g.gather_rows(xyz, order)
-    p = xyz.astype(np.float32)
+    p, origins = local_frame(xyz, offsets)  # float32, each cloud in its frame
+    viewpoints = (viewpoint - origins).astype(np.float32)
     del xyz
     cell_start = cells[2]
     search = (xs, order, *cells, dims, float(radius) ** 2)
@@ -245,7 +268,7 @@ def _pfh_radius_blocked(clouds, radius, n_bins, given, viewpoint, n_jobs):
     bounds = np.append(bounds[bounds < len(cell_start) - 1], len(cell_start) - 1)
     none, none_i = np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int32)
     f32 = np.empty((0, 3), dtype=np.float32)
-    no_normals = (f32, np.empty(0, dtype=np.float32), f32, f32[:, 0])
+    no_normals = (f32, f32, f32, f32[:, 0])
     few = {"min_chunk": 64}  # blocks are small: split them anyway
     # neighbourhood sizes in sorted order (the counts of the search)
     counts = np.empty(n_pts, dtype=np.int64)
@@ -264,7 +287,7 @@ def _pfh_radius_blocked(clouds, radius, n_bins, given, viewpoint, n_jobs):
         # normals straight from each ball, sorted, nothing stored
         n = np.empty((n_pts, 3), dtype=np.float32)
         curvature = np.empty(n_pts, dtype=np.float32)
-        est = (p, viewpoint.astype(np.float32), n, curvature)
+        est = (p, viewpoints, n, curvature)
         for c0, c1 in blocks:
             t0, t1 = int(cell_start[c0]), int(cell_start[c1])
             ball(c0, c1, none, counts[t0:t1], none_i, *est, True)
@@ -295,7 +318,8 @@ def _pfh_radius_blocked(clouds, radius, n_bins, given, viewpoint, n_jobs):
         point_of = order[t0:t1]
         args = (p, n, indptr, indices, n_bins, out)
         if reuse:
-            rows = _space_order(p[point_of], radius)
+            cloud = np.searchsorted(offsets, point_of, side="right")
+            rows = _space_order(p[point_of], radius, cloud)
             _pfh_reuse(rows, point_of, xs, inv, *args, n_jobs, pool)
         else:
             _pfh_rows_local(point_of, *args, n_jobs)
@@ -389,7 +413,9 @@ def compute_fpfh(
     Parameters
     ----------
     points : array-like of shape (n_points, 3+)
-        The cloud (float32 precision is used, as in PCL).
+        The cloud (float32 precision is used, as in PCL; an axis reaching
+        beyond 1024 from the origin is first taken relative to the cloud's
+        minimum, see the user guide).
     normals : array-like of shape (n_points, 3)
         Unit normals, used as given (PCL ``setInputNormals``): a norm more
         than 1e-3 away from 1 is an error. A row with a NaN is an undefined
@@ -421,7 +447,8 @@ def compute_fpfh(
     ------
     ValueError
         If ``convention`` is unknown, ``normals`` has another shape than the
-        points, or a row without NaN that is not a unit vector.
+        points, or a row without NaN that is not a unit vector, or the cloud
+        spans more than float32 squared distances can hold (about 1e19).
     """
     if convention not in FPFH_CONVENTIONS:
         raise ValueError(
@@ -551,7 +578,9 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
             clouds, n_neighbors=k, radius=self.radius, n_jobs=n_jobs,
             with_sqdist=False,
         )  # fmt: skip
-        p = xyz.astype(np.float32)
+        # float32 as PCL, each cloud in its local frame (far from the origin:
+        # relative to its minimum), the viewpoint moved into the same frame
+        p, origins = local_frame(xyz, offsets)
         given, mask = self._given_normals(clouds)
         if given is not None and mask.all():
             n = given
@@ -565,8 +594,8 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
                     n_jobs=n_jobs,
                     with_sqdist=False,
                 )
-            vp = _check_viewpoint(self.viewpoint)
-            n = _normals_f32(p, nnb, vp, n_jobs)[0]
+            vp = _check_viewpoint(self.viewpoint) - origins
+            n = _normals_f32(p, nnb, vp, n_jobs, offsets)[0]
             del nnb
             if given is not None:  # "auto" on clouds with and without normals
                 n[mask] = given[mask]
@@ -579,7 +608,7 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         # the search's temporaries are freed: return their pages to the system
         # before the kernels allocate the output (lower peak memory)
         release_free_memory()
-        out = self._kernel(p, normals, nb, n_jobs)
+        out = self._kernel(p, normals, nb, offsets, n_jobs)
         return out, undefined, offsets
 
     def undefined_mask(self, X):
@@ -722,7 +751,10 @@ _COMMON_PARAMS = """
         Radius for the estimated normals instead; likewise refused with
         given normals.
     viewpoint : tuple of 3 float, default=(0.0, 0.0, 0.0)
-        Estimated normals face this point (PCL ``setViewPoint``). Given
+        Estimated normals face this point (PCL ``setViewPoint``), a point in
+        the clouds' coordinates: for clouds at UTM coordinates the default
+        is thousands of kilometres away (pass the sensor's position; see
+        "Coordinates far from the origin" in the user guide). Given
         normals keep their sign: another viewpoint with given normals is an
         error.
     undefined : {"nan", "zero", "drop", "keep"}, default="nan"
@@ -836,8 +868,9 @@ class PFHTransformer(_LocalDescriptor):
         args = (float(self.radius), int(self.n_bins), given, vp, n_jobs)
         return _pfh_radius_blocked(clouds, *args)
 
-    def _kernel(self, p, normals, nb, n_jobs):
-        return _pfh_packed(p, normals.pop(), nb, int(self.n_bins), n_jobs)
+    def _kernel(self, p, normals, nb, offsets, n_jobs):
+        n_bins = int(self.n_bins)
+        return _pfh_packed(p, normals.pop(), nb, n_bins, n_jobs, offsets)
 
 
 class FPFHTransformer(_LocalDescriptor):
@@ -916,7 +949,7 @@ class FPFHTransformer(_LocalDescriptor):
     def _width(self):
         return 3 * int(self.n_bins)
 
-    def _kernel(self, p, normals, nb, n_jobs):
+    def _kernel(self, p, normals, nb, offsets, n_jobs):
         n_bins = int(self.n_bins)
         counts, table = _spfh_counts(p, normals.pop(), nb, n_bins, n_jobs, pack=True)
         # the normals are gone: hand their pages back before the output

@@ -696,19 +696,28 @@ def improved_rows(lo, hi, seg_ptr, xyz, points, normals, middle, n_bins, mode, o
         nmx = np.float32((xyz[far, 0] - mx) / r)
         nmy = np.float32((xyz[far, 1] - my) / r)
         nmz = np.float32((xyz[far, 2] - mz) / r)
+        fx_, fy_, fz_ = xyz[far, 0], xyz[far, 1], xyz[far, 2]
         for i in range(a, b):
             nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
             if not (nx == nx and ny == ny and nz == nz):
                 continue
+            # the farthest point (and its duplicates) lies on the line of n_m:
+            # its pair is degenerate by construction, (0, 0, 0) in PCL's
+            # rule; computed, its bin would be float rounding's choice (and
+            # change with the frame the cloud is computed in)
+            on_line = xyz[i, 0] == fx_ and xyz[i, 1] == fy_ and xyz[i, 2] == fz_
             for sign in (np.float32(1.0), np.float32(-1.0)):
                 # + 0 turns -0.0 into 0.0: n and -n give the same pair of
                 # normals whichever sign the estimate had, even on exact
                 # zeros (where atan2 would tell -0.0 from 0.0)
-                fy, fx, f2, f3, _ = _pair(
-                    pmx, pmy, pmz, nmx, nmy, nmz,
-                    points[i, 0], points[i, 1], points[i, 2],
-                    sign * nx + F0, sign * ny + F0, sign * nz + F0,
-                )  # fmt: skip
+                if on_line:
+                    fy = fx = f2 = f3 = F0
+                else:
+                    fy, fx, f2, f3, _ = _pair(
+                        pmx, pmy, pmz, nmx, nmy, nmz,
+                        points[i, 0], points[i, 1], points[i, 2],
+                        sign * nx + F0, sign * ny + F0, sign * nz + F0,
+                    )  # fmt: skip
                 b1 = _bin_theta(fy, fx, n_bins)
                 b2 = _bin_cosine(f2, n_bins)
                 b3 = _bin_cosine(f3, n_bins)

@@ -4,7 +4,7 @@ import typing
 
 import numpy as np
 
-from skpcd.features._overall import box_dimensions
+from skpcd.features._overall import _check_size_extents, box_dimensions
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
 from skpcd.utils._parallel import map_batches
@@ -50,15 +50,29 @@ def shape_features(points):
     features : ndarray of shape (18,)
         In the order of :attr:`ShapeFeatures.feature_names`; see
         :class:`ShapeFeatures` for their definitions.
+
+    Raises
+    ------
+    ValueError
+        If the segment spans more than 1e100 along an axis (its box volume
+        would overflow).
     """
     xyz = np.asarray(points, dtype=np.float64)[:, :3]
     n = len(xyz)
+    _check_size_extents([xyz], input_name="points")
+    # relative to the lower corner (exact far from the origin): nothing
+    # below depends on where the segment lies
+    xyz = xyz - xyz.min(axis=0)
     centred = xyz - xyz.mean(axis=0)
     # horizontal principal axes give an oriented footprint
     length, width, height = box_dimensions(xyz, "obb_xy")
     z = xyz[:, 2]
     area = length * width
-    cov = centred.T @ centred / n
+    # the eigenvalue features are ratios: the covariance of the coordinates
+    # scaled to at most 1, which no extent overflows
+    scale = np.abs(centred).max()
+    unit = centred / scale if scale > 0 else centred
+    cov = unit.T @ unit / n
     evals, evecs = np.linalg.eigh(cov)
     evals = np.clip(evals[::-1], 0.0, None)  # l1 >= l2 >= l3
     total = evals.sum()
@@ -83,7 +97,7 @@ def shape_features(points):
         z_mean = float(z_rel.mean())
     else:
         top_fraction, z_mean = 1.0, 0.0
-    skew = _safe_div(float(np.mean((z - z.mean()) ** 3)), z_std**3)
+    skew = float(np.mean(((z - z.mean()) / z_std) ** 3)) if z_std > 0 else 0.0
     return np.array(
         [
             np.log10(n),
@@ -145,6 +159,10 @@ class ShapeFeatures(CloudTransformer):
     point: ``z_std_ratio`` is std(z) / height, ``z_mean_ratio`` the mean
     relative height, ``top_fraction`` the share of points in the top 20 %.
     A segment with zero extent gets zeros where a ratio is undefined.
+    Everything is computed relative to the segment's lower corner, in
+    float64, so the features are the same wherever it lies (UTM coordinates
+    included); a segment spanning more than 1e100 along an axis is a
+    ValueError (its volume would overflow).
 
     References
     ----------
@@ -182,6 +200,7 @@ class ShapeFeatures(CloudTransformer):
             One row per segment.
         """
         clouds = check_point_clouds(X)
+        _check_size_extents(clouds)
         return map_batches(_shape_batch, clouds)
 
     def get_feature_names_out(self, input_features=None):

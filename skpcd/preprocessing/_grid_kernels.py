@@ -106,8 +106,11 @@ def cells_with(flag, order, cell_start):
 @njit(cache=True, nogil=True)
 def _gap(q, origin, h, a):
     """Squared distance from coordinate ``q`` to cell ``a``'s slab, a little
-    short (cell coordinates are rounded): 0 inside."""
-    g = max(origin + a * h - q, q - (origin + (a + 1) * h), 0.0) - 1e-7 * h
+    short (cell coordinates are rounded): 0 inside. Computed from ``q -
+    origin`` (exact: the origin is the cloud's minimum), so that the
+    rounding scales with the cloud's extent, not with its coordinates."""
+    u = q - origin
+    g = max(a * h - u, u - (a + 1) * h, 0.0) - 1e-7 * h
     return g * g if g > 0.0 else 0.0
 
 
@@ -335,6 +338,7 @@ def knn_cells(
             if kc == 0 or (len(todo) and not todo[i]):
                 continue
             qx, qy, qz = xs[t0, 0], xs[t0, 1], xs[t0, 2]
+            ux, uy, uz = qx - origin[c, 0], qy - origin[c, 1], qz - origin[c, 2]
             bd[0] = -1.0
             bi[0] = i
             count = 1
@@ -361,20 +365,23 @@ def knn_cells(
                         d2 = ex * ex + ey * ey + ez * ez
                         if t != t0 and (count < kc or d2 <= bd[kc - 1]):
                             count = _insert(bd, bi, count, kc, d2, order[t])
-                # distance from the query to the space outside the scanned cells
+                # distance from the query to the space outside the scanned
+                # cells, from the query's offset to the cloud's minimum
+                # (exact), not from absolute cell edges (rounded to the ulp
+                # of the coordinates: 2e-9 at 1e7, more than the margin)
                 bound = np.inf
                 if cx - s > 0:
-                    bound = min(bound, qx - (origin[c, 0] + (cx - s) * hc))
+                    bound = min(bound, ux - (cx - s) * hc)
                 if cx + s < nx - 1:
-                    bound = min(bound, origin[c, 0] + (cx + s + 1) * hc - qx)
+                    bound = min(bound, (cx + s + 1) * hc - ux)
                 if cy - s > 0:
-                    bound = min(bound, qy - (origin[c, 1] + (cy - s) * hc))
+                    bound = min(bound, uy - (cy - s) * hc)
                 if cy + s < ny - 1:
-                    bound = min(bound, origin[c, 1] + (cy + s + 1) * hc - qy)
+                    bound = min(bound, (cy + s + 1) * hc - uy)
                 if cz - s > 0:
-                    bound = min(bound, qz - (origin[c, 2] + (cz - s) * hc))
+                    bound = min(bound, uz - (cz - s) * hc)
                 if cz + s < nz - 1:
-                    bound = min(bound, origin[c, 2] + (cz + s + 1) * hc - qz)
+                    bound = min(bound, (cz + s + 1) * hc - uz)
                 if bound == np.inf:
                     break  # the whole cloud was scanned
                 bound -= 1e-7 * hc  # cell coordinates are rounded
@@ -453,14 +460,14 @@ def ball_cells(
     f1 = np.empty(0, dtype=np.float32)
     _ball(
         lo, hi, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2,
-        indptr, counts, indices, sqdist, -1, f32, f1, f32, f1, True,
+        indptr, counts, indices, sqdist, -1, f32, f32, f32, f1, True,
     )  # fmt: skip
 
 
 @njit(cache=True, nogil=True)
 def ball_cells_local(
     lo, hi, base, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims,
-    r2, indptr, counts, indices, points, viewpoint, normals, curvature, sort,
+    r2, indptr, counts, indices, points, viewpoints, normals, curvature, sort,
 ):  # fmt: skip
     """:func:`ball_cells` with rows numbered by sorted position: the point
     at position ``t`` of ``order`` is row ``t - base`` of ``counts`` and of
@@ -468,19 +475,20 @@ def ball_cells_local(
     of cells gets its own small neighbourhood arrays. With ``normals``
     non-empty, nothing is stored but the counts and each point's normal and
     curvature (:func:`~skpcd.preprocessing._normals_kernels.normals_rows`
-    on the sorted neighbourhood, float32 ``points``). Rows are sorted only
-    with ``sort``."""
+    on the sorted neighbourhood, float32 ``points`` in their clouds' local
+    frames, ``viewpoints`` one row per cloud in the same frames). Rows are
+    sorted only with ``sort``."""
     _ball(
         lo, hi, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2,
         indptr, counts, indices, indices[:0].astype(np.float32), base,
-        points, viewpoint, normals, curvature, sort or len(normals) > 0,
+        points, viewpoints, normals, curvature, sort or len(normals) > 0,
     )  # fmt: skip
 
 
 @njit(cache=True, nogil=True, inline="always")
 def _ball(
     lo, hi, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2,
-    indptr, counts, indices, sqdist, base, points, viewpoint, normals, curvature,
+    indptr, counts, indices, sqdist, base, points, viewpoints, normals, curvature,
     sort,
 ):  # fmt: skip
     """The body of :func:`ball_cells` (rows by point, ``base`` < 0) and
@@ -499,7 +507,7 @@ def _ball(
     indices = borrow(indices)
     sqdist = borrow(sqdist)
     points = borrow(points)
-    viewpoint = borrow(viewpoint)
+    viewpoints = borrow(viewpoints)
     normals = borrow(normals)
     curvature = borrow(curvature)
     # scratch for a ball, grown to the points of the 27 cells when needed
@@ -587,7 +595,9 @@ def _ball(
                 counts[row] = m
                 bi[0] = i  # the point first, as _write_row stores it
                 ends[1] = m
-                _normal_row(points, ends, bi, viewpoint, normals, curvature, 0, i)
+                c = cell_cloud[cell]
+                vx, vy, vz = viewpoints[c, 0], viewpoints[c, 1], viewpoints[c, 2]
+                _normal_row(points, ends, bi, vx, vy, vz, normals, curvature, 0, i)
                 continue
             _write_row(indices, sqdist, indptr[row], i, bi, bd, m)
     keep(f_own)

@@ -17,6 +17,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from skpcd.utils._parallel import effective_threads, parallel_rows
+from skpcd.utils._validation import check_extents, cloud_bounds, max_extent
 
 __all__ = ["Neighborhoods", "compute_neighborhoods"]
 
@@ -109,7 +110,10 @@ def compute_neighborhoods(
 
     Notes
     -----
-    Distances are computed in float64 and stored as float32. When several
+    Distances are computed in float64 and stored as float32, from the
+    differences of the coordinates (exact for points of one cloud far from
+    the origin): the neighbourhoods do not depend on where the cloud lies,
+    up to the float64 rounding of the coordinates given. When several
     points are at the same distance (coordinates quantised to a centimetre
     make this common), the lowest index comes first and is the one kept at
     the k-th place; PCL's FLANN tree may keep another; see the user guide.
@@ -179,6 +183,13 @@ def search_packed(
     """
     _check_search(n_neighbors, radius, algorithm)
     cloud_ptr = np.asarray(cloud_ptr, dtype=np.int64)
+    # squared distances overflow beyond ~7.7e153: refused, not searched
+    lo_hi = cloud_bounds(xyz, cloud_ptr)
+    check_extents(
+        *lo_hi,
+        max_extent(np.float64),
+        what="squared distances in float64 (the neighbour search)",
+    )
     sizes = np.diff(cloud_ptr)
     indptr = np.zeros(len(xyz) + 1, dtype=np.int64)
     if n_neighbors is not None:
@@ -203,7 +214,9 @@ def search_packed(
         )
         hard = np.zeros(n, dtype=np.bool_)
         todo = np.zeros(0, dtype=np.bool_)
-        origin, h, dims, order, cells = _knn_grid(xyz, cloud_ptr, int(n_neighbors))
+        origin, h, dims, order, cells = _knn_grid(
+            xyz, cloud_ptr, int(n_neighbors), lo_hi
+        )
         rows = np.arange(len(cells[1]))
         for attempt in range(_COARSER):
             xs = g.gather_rows(xyz, order)
@@ -222,12 +235,12 @@ def search_packed(
             if attempt == _COARSER - 1:
                 break
             # isolated points: again on cells four times wider
-            origin, h, dims = grid_shape(xyz, cloud_ptr, 4 * h)
+            origin, h, dims = grid_shape(xyz, cloud_ptr, 4 * h, lo_hi)
             order, cells = build_grid(xyz, cloud_ptr, origin, h, dims)
             rows = g.cells_with(todo, order, cells[2])
         _knn_kd_tree(xyz, cloud_ptr, indptr, np.flatnonzero(todo), n_jobs, nb)
         return nb
-    origin, h, dims = grid_shape(xyz, cloud_ptr, np.full(len(sizes), radius))
+    origin, h, dims = grid_shape(xyz, cloud_ptr, np.full(len(sizes), radius), lo_hi)
     order, cells = build_grid(xyz, cloud_ptr, origin, h, dims)
     args = (g.gather_rows(xyz, order), order, *cells, dims, float(radius) ** 2)
     counts = np.empty(n, dtype=np.int64)
@@ -277,15 +290,7 @@ def build_grid(xyz, cloud_ptr, origin, h, dims):
     return order, g.sorted_cells(keys[order], cloud_ptr)
 
 
-def _extents(xyz, cloud_ptr):
-    n_clouds = len(cloud_ptr) - 1
-    lo = np.zeros((n_clouds, 3))
-    hi = np.zeros((n_clouds, 3))
-    full = np.flatnonzero(np.diff(cloud_ptr) > 0)
-    if len(full):
-        lo[full] = np.minimum.reduceat(xyz, cloud_ptr[full], axis=0)
-        hi[full] = np.maximum.reduceat(xyz, cloud_ptr[full], axis=0)
-    return lo, hi
+_extents = cloud_bounds
 
 
 def grid_shape(xyz, cloud_ptr, h, lo_hi=None):
@@ -306,14 +311,14 @@ def grid_shape(xyz, cloud_ptr, h, lo_hi=None):
     return lo, h, dims
 
 
-def _knn_grid(xyz, cloud_ptr, k):
+def _knn_grid(xyz, cloud_ptr, k, lo_hi=None):
     """Grid for k-nearest searches, cell sizes adapted to each cloud's density.
 
     Returns ``origin, h, dims`` and :func:`build_grid`'s ``order, cells``.
     """
     sizes = np.diff(cloud_ptr)
     target = max(1.0, _OCCUPANCY * k)
-    lo, hi = _extents(xyz, cloud_ptr)
+    lo, hi = _extents(xyz, cloud_ptr) if lo_hi is None else lo_hi
     e = np.sort(hi - lo, axis=1)
     # first guess: points spread over the largest face of the bounding box
     area = e[:, 2] * np.maximum(e[:, 1], 1e-3 * e[:, 2])

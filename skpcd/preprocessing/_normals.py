@@ -13,6 +13,7 @@ from skpcd.preprocessing._neighbors import (
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
 from skpcd.utils._parallel import map_batches, parallel_rows
+from skpcd.utils._validation import local_frame
 
 __all__ = ["NormalEstimator", "estimate_normals"]
 
@@ -75,8 +76,13 @@ def estimate_normals(
     The computation follows PCL's ``NormalEstimation`` operation by
     operation in float32 (covariance accumulated about the first neighbour,
     ``computeRoots``, ``eigen33``), so that the normals, and the PFH built
-    on them, agree with PCL's. Coordinates are rounded to float32 first:
-    subtract a local origin from projected coordinates with large values.
+    on them, agree with PCL's. Coordinates within 1024 of the origin are
+    rounded to float32 as PCL reads them; an axis reaching farther (UTM
+    coordinates) is first taken relative to the cloud's minimum, in float64,
+    and the viewpoint (a point in the cloud's coordinates) with it: the
+    normals depend on the cloud's shape and on where the viewpoint is
+    relative to it, not on where the cloud lies (see "Coordinates far from
+    the origin" in the user guide).
 
     Examples
     --------
@@ -104,22 +110,37 @@ def estimate_normals(
             f"neighborhoods cover {neighborhoods.n_points} points, the cloud has "
             f"{len(xyz)}"
         )
-    return _normals_packed(xyz, neighborhoods, vp, n_jobs)
+    offsets = np.array([0, len(xyz)], dtype=np.int64)
+    return _normals_packed(xyz, offsets, neighborhoods, vp, n_jobs)
 
 
-def _normals_packed(xyz, neighborhoods, viewpoint, n_jobs):
-    """Kernel call on packed arrays (one or many clouds, global indices)."""
+def _normals_packed(xyz, offsets, neighborhoods, viewpoint, n_jobs):
+    """Kernel call on packed float64 arrays (one or many clouds, global
+    indices), each cloud in its local frame."""
+    p, origins = local_frame(xyz, offsets)
     normals, curvature = _normals_f32(
-        np.ascontiguousarray(xyz, dtype=np.float32), neighborhoods, viewpoint, n_jobs
+        p, neighborhoods, viewpoint - origins, n_jobs, offsets
     )
     return normals.astype(np.float64), curvature.astype(np.float64)
 
 
-def _normals_f32(points, neighborhoods, viewpoint, n_jobs):
-    """Normals and curvature, float32, of float32 packed points."""
+def _normals_f32(points, neighborhoods, viewpoint, n_jobs, cloud_ptr=None):
+    """Normals and curvature, float32, of float32 packed points.
+
+    ``points`` are in their clouds' local frames
+    (:func:`~skpcd.utils._validation.local_frame`); ``viewpoint`` is one
+    point (3,) for all, or one per cloud ``(n_clouds, 3)`` in the same
+    frames, the clouds given by ``cloud_ptr`` (default: one cloud).
+    """
     from skpcd.preprocessing._normals_kernels import normals_rows
 
     n = len(points)
+    if cloud_ptr is None:
+        cloud_ptr = np.array([0, n], dtype=np.int64)
+    cloud_ptr = np.asarray(cloud_ptr, dtype=np.int64)
+    viewpoints = np.broadcast_to(
+        np.asarray(viewpoint, dtype=np.float32), (len(cloud_ptr) - 1, 3)
+    )
     normals = np.empty((n, 3), dtype=np.float32)
     curvature = np.empty(n, dtype=np.float32)
     parallel_rows(
@@ -129,7 +150,8 @@ def _normals_f32(points, neighborhoods, viewpoint, n_jobs):
         points,
         neighborhoods.indptr,
         neighborhoods.indices,
-        viewpoint.astype(np.float32),
+        np.ascontiguousarray(viewpoints),
+        cloud_ptr,
         normals,
         curvature,
     )
@@ -159,7 +181,8 @@ class NormalEstimator(CloudTransformer):
     radius : float, default=None
         Radius search instead of k-NN (PCL ``setRadiusSearch``).
     viewpoint : tuple of 3 float, default=(0.0, 0.0, 0.0)
-        Normals face this point (PCL ``setViewPoint``).
+        Normals face this point (PCL ``setViewPoint``), in the clouds'
+        coordinates: far from clouds at UTM coordinates by default.
     include_curvature : bool, default=False
         Also append the curvature as column 6.
     n_jobs : int, default=None
@@ -239,7 +262,7 @@ class NormalEstimator(CloudTransformer):
         xyz, offsets, neighborhoods = pack_neighborhoods(
             clouds, n_neighbors=self.n_neighbors, radius=self.radius, n_jobs=n_jobs
         )
-        normals, curvature = _normals_packed(xyz, neighborhoods, vp, n_jobs)
+        normals, curvature = _normals_packed(xyz, offsets, neighborhoods, vp, n_jobs)
         cols = [xyz, normals] + ([curvature[:, None]] if self.include_curvature else [])
         out = np.hstack(cols)
         return [out[offsets[i] : offsets[i + 1]] for i in range(len(clouds))]

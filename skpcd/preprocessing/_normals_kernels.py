@@ -107,26 +107,32 @@ def eigen33_smallest(c00, c01, c02, c11, c12, c22):
 
 
 @njit(cache=True, nogil=True)
-def normals_rows(lo, hi, points, indptr, indices, viewpoint, normals, curvature):
+def normals_rows(
+    lo, hi, points, indptr, indices, viewpoints, cloud_ptr, normals, curvature
+):
     """Normals and curvature of points ``lo`` to ``hi`` from their neighbourhoods.
 
-    ``points`` and ``viewpoint`` are float32; rows of ``normals`` (n, 3) and
+    ``points`` (in their clouds' local frames) and ``viewpoints`` (one row
+    per cloud, in the same frames; cloud ``c`` is ``cloud_ptr[c]`` to
+    ``cloud_ptr[c + 1]``) are float32; rows of ``normals`` (n, 3) and
     ``curvature`` (n,) are filled in place. Fewer than three neighbours give
     NaN normal and curvature (PCL's rule).
     """
     points, indptr, indices = borrow(points), borrow(indptr), borrow(indices)
-    viewpoint, normals, curvature = (
-        borrow(viewpoint),
-        borrow(normals),
-        borrow(curvature),
-    )
+    viewpoints, cloud_ptr = borrow(viewpoints), borrow(cloud_ptr)
+    normals, curvature = borrow(normals), borrow(curvature)
+    c = np.searchsorted(cloud_ptr, lo, side="right") - 1
     for i in range(lo, hi):
-        _normal_row(points, indptr, indices, viewpoint, normals, curvature, i, i)
+        while i >= cloud_ptr[c + 1]:
+            c += 1
+        vx, vy, vz = viewpoints[c, 0], viewpoints[c, 1], viewpoints[c, 2]
+        _normal_row(points, indptr, indices, vx, vy, vz, normals, curvature, i, i)
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _normal_row(points, indptr, indices, viewpoint, normals, curvature, r, i):
-    """Normal and curvature of point ``i`` from CSR row ``r``. Inlined."""
+def _normal_row(points, indptr, indices, vpx, vpy, vpz, normals, curvature, r, i):
+    """Normal and curvature of point ``i`` from CSR row ``r``, flipped to
+    face the viewpoint ``(vpx, vpy, vpz)`` (float32). Inlined."""
     start, stop = indptr[r], indptr[r + 1]
     m = stop - start
     if m < 3:
@@ -162,9 +168,9 @@ def _normal_row(points, indptr, indices, viewpoint, normals, curvature, r, i):
     lam, nx, ny, nz = eigen33_smallest(c00, c01, c02, c11, c12, c22)
     trace = (c00 + c11) + c22
     curvature[i] = abs(lam / trace) if trace != F0 else F0
-    vx = viewpoint[0] - points[i, 0]
-    vy = viewpoint[1] - points[i, 1]
-    vz = viewpoint[2] - points[i, 2]
+    vx = vpx - points[i, 0]
+    vy = vpy - points[i, 1]
+    vz = vpz - points[i, 2]
     if (vx * nx + vy * ny) + vz * nz < F0:
         nx, ny, nz = -nx, -ny, -nz
     normals[i, 0] = nx

@@ -26,14 +26,32 @@ def _voxel_size(xyz, voxel_size):
     return spacing if np.isfinite(spacing) else 1.0
 
 
+# Cells per axis stay below this: their indices fit in an int64.
+_MAX_CELLS = 2.0**62
+
+
 def _grid_sample_indices(xyz, h):
     """Indices (ascending) of the point nearest its cell's centre, per cell."""
     if len(xyz) == 0:
         return np.zeros(0, dtype=np.intp)
     lo = xyz.min(axis=0)
-    cell = np.floor((xyz - lo) / h).astype(np.int64)
-    centre = lo + (cell + 0.5) * h
-    d2 = ((xyz - centre) ** 2).sum(axis=1)
+    # everything relative to the grid's corner (exact for a cloud far from
+    # the origin): cells and distances to their centres do not depend on
+    # where the cloud lies, ties included
+    u = xyz - lo
+    with np.errstate(over="ignore"):
+        extent = u.max(axis=0)
+        n_cells = extent / h
+    if not (n_cells < _MAX_CELLS).all():
+        axis = int(np.argmax(~(n_cells < _MAX_CELLS)))
+        raise ValueError(
+            f"voxel_size={h:.6g} cuts the cloud's extent along {'xyz'[axis]} "
+            f"({extent[axis]:.6g}) into {n_cells[axis]:.3g} cells, more than "
+            "cell indices can hold (2**62): choose a larger voxel_size."
+        )
+    cell = np.floor(u / h).astype(np.int64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        d2 = ((u - (cell + 0.5) * h) ** 2).sum(axis=1)
     dims = cell.max(axis=0) + 1
     if np.prod(dims.astype(np.float64)) < 2.0**62:
         keys = [(cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]]
@@ -75,9 +93,19 @@ def grid_sample(points, voxel_size="auto", *, return_index=False):
     index : ndarray of shape (n_kept,)
         Their indices in ``points``, ascending; only with ``return_index``.
 
+    Raises
+    ------
+    ValueError
+        If ``voxel_size`` is not positive, or so small against the cloud's
+        extent that a cell index would overflow an int64 (more than 2**62
+        cells along an axis; PCL's ``VoxelGrid``, in int32, warns and
+        returns its input unchanged beyond 2**31 cells in all).
+
     Notes
     -----
     Ties (two points equally close to a centre) keep the lower index.
+    Cells and distances are computed relative to the grid's corner, so the
+    result is the same wherever the cloud lies (UTM coordinates included).
     Wang et al. (2023) use this sampling with 0.5 m cells on segments whose
     point spacing is 0.35-2 m.
 

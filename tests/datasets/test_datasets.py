@@ -52,6 +52,30 @@ def test_make_point_clouds_shapes():
         make_point_clouds(2, n_columns=2)
 
 
+@pytest.mark.parametrize("n_columns", [6, 8])
+def test_make_point_clouds_columns_3_to_5_are_unit_normals(n_columns):
+    """With 6 or more columns, columns 3-5 are the surface's unit normals (the
+    descriptors read them as given normals); further columns are noise."""
+    from skpcd.features import PFHTransformer
+    from skpcd.preprocessing import estimate_normals
+
+    clouds = make_point_clouds(4, n_columns=n_columns, noise=0.0, random_state=0)
+    for c in clouds:
+        assert c.shape[1] == n_columns
+        np.testing.assert_allclose(np.linalg.norm(c[:, 3:6], axis=1), 1.0, atol=1e-12)
+        # the normals of the (noise-free) surface: the estimate's axis
+        estimated, _ = estimate_normals(c, n_neighbors=10)
+        cos = np.abs(np.sum(estimated * c[:, 3:6], axis=1))
+        assert np.median(cos) > 0.99
+        assert ((c[:, 6:] >= 0) & (c[:, 6:] < 1)).all()
+    # accepted as given normals by default
+    rows = PFHTransformer(pooling="mean").fit_transform(clouds)
+    assert rows.shape == (4, 125) and np.isfinite(rows).all()
+    # the xyz columns do not depend on n_columns
+    plain = make_point_clouds(4, noise=0.0, random_state=0)
+    np.testing.assert_array_equal(plain[0], clouds[0][:, :3])
+
+
 def test_make_primitives_shapes_sizes_and_seed():
     from skpcd.datasets import PRIMITIVES, make_primitives
 

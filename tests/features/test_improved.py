@@ -13,14 +13,20 @@ from skpcd.features._pfh_kernels import pair_features
 
 
 def _reference(points, normals, pm, n_bins=5):
-    """Straight from the definition, with NumPy and the pair function."""
+    """Straight from the definition, with NumPy and the pair function, in the
+    segment's frame (relative to its lower corner); the farthest point's pair
+    is degenerate by construction, (0, 0, 0)."""
+    lo = points.min(axis=0)
+    points, pm = points - lo, pm - lo
     d2 = ((points - pm) ** 2).sum(axis=1)
     far = np.lexsort((points[:, 2], points[:, 1], points[:, 0], -d2))[0]
     nm = ((points[far] - pm) / np.sqrt(d2[far])).astype(np.float32)
     hist = np.zeros(n_bins**3)
-    for p, n in zip(points.astype(np.float32), normals):
+    for p, n, q in zip(points.astype(np.float32), normals, points):
         for sign in (1, -1):
             f1, f2, f3, _ = pair_features(pm.astype(np.float32), nm, p, sign * n)
+            if (q == points[far]).all():
+                f1 = f2 = f3 = 0.0
             b = [
                 int(min(max(np.floor(n_bins * (f + 1) / 2), 0), n_bins - 1))
                 for f in (f2, f3)
@@ -41,6 +47,28 @@ def test_improved_pfh_follows_its_definition():
         # float32 rounding may move a point across a bin edge, rarely
         assert np.abs(row - ref).sum() < 1.0
     np.testing.assert_allclose(got.sum(axis=1), 100)
+
+
+def test_farthest_point_pair_is_binned_as_degenerate():
+    """The line from the middle point to the farthest point is n_m itself: the
+    pair is PCL's degenerate (0, 0, 0), bin 62, not a bin float32 rounding
+    picks (which changed with the frame: up to 100 / n per segment)."""
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        pts = rng.normal(size=(3, 3)) * 5 + rng.uniform(-500, 500, size=3)
+        normals = rng.normal(size=(3, 3))
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        cloud = np.hstack([pts, normals])
+        row = ImprovedPFHTransformer().fit_transform([cloud])[0]
+        ref = _reference(pts, normals.astype(np.float32), pts.mean(axis=0))
+        np.testing.assert_allclose(row, ref, atol=1e-9)
+        assert row[62] >= 100 / 3 - 1e-9
+        # the same row wherever the segment lies
+        for shift in (0.1, 1e3, 4.2e6):
+            moved = ImprovedPFHTransformer().fit_transform(
+                [cloud + np.array([shift, 0, 0, 0, 0, 0])]
+            )
+            np.testing.assert_allclose(moved[0], row, atol=1e-9)
 
 
 def test_fpfh_variant_blocks_sum_to_100_and_bins_parameter():

@@ -141,3 +141,34 @@ def test_grid_equals_kd_tree_on_real_objects(dales):
     _assert_same(grid, tree, ties_ok=True)
     # ties aside, the neighbour sets agree: same distances row by row
     assert (grid.indices == tree.indices).mean() > 0.99
+
+
+@pytest.mark.parametrize("algorithm", ["grid", "kd_tree"])
+def test_far_from_the_origin_exact_and_the_same_as_at_the_origin(algorithm):
+    """At 1e7 the grid's shell bounds are computed from offsets to the cloud's
+    minimum (exact), not from absolute cell edges (rounded to 2e-9, more
+    than the 1e-7 cell margin of millimetre cells); an exact translate has
+    the same neighbourhoods, ties included."""
+    rng = np.random.default_rng(5)
+    pts = np.round(rng.uniform(0, 0.05, size=(600, 3)) * 2**16) / 2**16
+    far = pts + np.array([1e7, -1e7, 3e6])
+    for search in ({"n_neighbors": 9}, {"radius": 0.004}):
+        a = compute_neighborhoods(pts, algorithm=algorithm, **search)
+        b = compute_neighborhoods(far, algorithm=algorithm, **search)
+        np.testing.assert_array_equal(a.indptr, b.indptr)
+        np.testing.assert_array_equal(a.indices, b.indices)
+        np.testing.assert_array_equal(a.sqdist, b.sqdist)
+    # and equal to brute force on the far coordinates
+    d = cdist(far, far) ** 2
+    nb = compute_neighborhoods(far, n_neighbors=9, algorithm=algorithm)
+    idx = nb.indices.reshape(-1, 9)
+    kth = np.sort(d, axis=1)[:, 8]
+    np.testing.assert_array_equal(np.take_along_axis(d, idx, 1).max(axis=1), kth)
+
+
+def test_extents_whose_squares_overflow_are_refused():
+    pts = np.random.default_rng(0).random((20, 3)) * 1e200
+    with pytest.raises(ValueError, match=r"X\[0\] spans .* float64 \(the neighbour"):
+        compute_neighborhoods(pts, n_neighbors=3)
+    # a cloud far out with a representable extent is searched
+    compute_neighborhoods(pts * 1e-60 + 1e250, n_neighbors=3)

@@ -121,3 +121,25 @@ def test_estimator_replaces_given_normals():
     for o in est.fit_transform(clouds):
         norm = np.linalg.norm(o[:, 3:6], axis=1)
         assert np.all(np.isnan(norm) | (np.abs(norm - 1) < 1e-6))
+
+
+def test_normals_at_utm_coordinates():
+    """Float32 of absolute UTM coordinates is 0.5 m coarse at y = 4.2e6: the
+    normals of a 5 cm grid were noise. In the cloud's local frame they are
+    those of the cloud at the origin (the viewpoint moved along)."""
+    g = np.stack(np.meshgrid(np.arange(20) * 0.05, np.arange(20) * 0.05, [0.0]), -1)
+    plane = g.reshape(-1, 3) @ np.array([[1, 0, 0], [0, 1, 0.3], [0, 0, 1]])
+    utm = np.array([5e5, 4.2e6, 30.0])
+    above = tuple(utm + np.array([0, 0, 10]))
+    ref, curv = estimate_normals(plane, n_neighbors=10, viewpoint=(0, 0, 10))
+    got, got_curv = estimate_normals(plane + utm, n_neighbors=10, viewpoint=above)
+    # float32 rounding of the coordinates relative to the cloud (z = 30 is
+    # kept as given): within 1e-4 of the plane's normal, as at the origin
+    true = np.array([0.0, -0.3, 1.0]) / np.hypot(0.3, 1.0)
+    np.testing.assert_allclose(ref, np.broadcast_to(true, ref.shape), atol=1e-4)
+    np.testing.assert_allclose(got, ref, atol=1e-4)
+    np.testing.assert_allclose(got_curv, curv, atol=1e-6)
+    est = NormalEstimator(n_neighbors=10, viewpoint=above)
+    out = est.fit_transform([plane + utm])[0]
+    np.testing.assert_array_equal(out[:, :3], plane + utm)
+    np.testing.assert_array_equal(out[:, 3:], got)

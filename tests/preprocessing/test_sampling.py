@@ -54,3 +54,23 @@ def test_bad_input_and_transformer():
     clouds = [np.random.default_rng(1).uniform(0, 2, (300, 3)), np.zeros((0, 3))]
     out = GridSampler(voxel_size=0.5).fit_transform(clouds)
     assert 0 < len(out[0]) <= 64 and len(out[1]) == 0
+
+
+def test_far_from_the_origin_the_same_points_ties_included():
+    # a grid of points: many exact ties to the cell centres
+    g = np.stack(np.meshgrid(*[np.arange(8) * 0.25] * 3), -1).reshape(-1, 3)
+    for shift in ([5e5, 4.2e6, 0.0], [1e7, -1e7, 1e7]):
+        moved = g + np.array(shift)
+        np.testing.assert_array_equal(
+            grid_sample(moved, 0.5, return_index=True)[1],
+            grid_sample(g, 0.5, return_index=True)[1],
+        )
+
+
+def test_voxel_size_too_small_for_the_extent_is_a_clear_error():
+    pts = np.array([[0.0, 0, 0], [1e7, 0, 0]])
+    with pytest.raises(ValueError, match=r"cuts the cloud's extent along x .*2\*\*62"):
+        grid_sample(pts, 1e-12)
+    assert len(grid_sample(pts, 1e-9)) == 2
+    with pytest.raises(ValueError, match="cells"):
+        GridSampler().fit_transform([np.random.default_rng(0).random((9, 3)) * 1e200])
