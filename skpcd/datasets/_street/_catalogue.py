@@ -345,7 +345,7 @@ def tree(rng):
     crown_h = height - base
     trunk_r = 0.03 + height * _u(rng, 0.01, 0.02)
     leaf_off = kind != "conifer" and rng.random() < 0.15
-    p_hit = _u(rng, 0.06, 0.12) if leaf_off else _u(rng, 0.25, 0.55)
+    p_hit = _u(rng, 0.06, 0.12) if leaf_off else _u(rng, 0.35, 0.7)
     lean = rng.normal(0, 0.03, 2)
     top = np.array([lean[0] * height, lean[1] * height, base + 0.45 * crown_h])
     parts = Parts().cylinder((0, 0, 0), top, trunk_r, trunk_r * 0.55)
@@ -359,7 +359,7 @@ def tree(rng):
         out = np.array([np.cos(a), np.sin(a), 0.0]) * reach
         end = center + out + [0.0, 0.0, _u(rng, -0.1, 0.4) * crown_h]
         parts.cylinder(start, end, trunk_r * _u(rng, 0.25, 0.45), trunk_r * 0.1)
-    n_cl = int(np.clip(10 + 3.0 * crown_r * crown_h, 10, 80))
+    n_cl = int(np.clip(12 + 4.0 * crown_r * crown_h, 12, 160))
     if kind == "conifer":
         z = base + crown_h * rng.uniform(0, 1, n_cl) ** 1.3
         rad = crown_r * (height - z) / crown_h * np.sqrt(rng.uniform(0.2, 1, n_cl))
@@ -376,7 +376,7 @@ def tree(rng):
             crown_r * 0.8,
             crown_h * 0.4,
         ]
-    size = np.clip(0.35 * np.sqrt(crown_r), 0.3, 1.0)
+    size = np.clip(0.3 + 0.12 * crown_r, 0.35, 0.9)
     radii = size * rng.uniform(0.6, 1.3, (n_cl, 1)) * [1.0, 1.0, 0.75]
     for c, rr in zip(cen, radii):
         parts.ellipsoid(
@@ -572,9 +572,9 @@ def other(rng):
 
 def fence(rng):
     """A front-garden fence along the street: posts and a panel."""
-    length = _u(rng, 3.0, 12.0)
-    h = _u(rng, 0.8, 1.8)
-    kind = _pick(rng, ("mesh", "railing", "panel"), p=(0.4, 0.35, 0.25))
+    length = _u(rng, 3.0, 20.0)
+    kind = _pick(rng, ("mesh", "railing", "panel"), p=(0.35, 0.3, 0.35))
+    h = _u(rng, 0.8, 2.4) if kind != "railing" else _u(rng, 0.8, 1.4)
     p_hit = {"mesh": _u(rng, 0.25, 0.5), "railing": _u(rng, 0.3, 0.5), "panel": 1.0}
     parts = Parts()
     n_posts = max(2, int(length / 2.2) + 1)
@@ -613,7 +613,7 @@ def building(rng, width, base_depth=0.0):
     back wall seen through the windows, side walls, balconies, and a flat
     or gabled roof.
     """
-    floors = int(rng.randint(2, 7))
+    floors = int(rng.choice([1, 2, 2, 3, 3, 4, 5, 6]))
     gf = _u(rng, 3.2, 4.5)
     fh = _u(rng, 2.8, 3.4)
     height = gf + (floors - 1) * fh

@@ -57,7 +57,7 @@ _INV53 = 1.0 / 9007199254740992.0
 _EPS = 1e-12
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
 def hash64(seed, k, salt):
     """A 64-bit hash of (seed, ray id, salt): the splitmix64 finaliser."""
     z = np.uint64(seed) + np.uint64(k) * _C1 + np.uint64(salt) * _C3
@@ -66,7 +66,7 @@ def hash64(seed, k, salt):
     return z ^ (z >> _S31)
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
 def uniform(seed, k, salt):
     """A uniform number in [0, 1) from (seed, ray id, salt)."""
     return np.float64(hash64(seed, k, salt) >> _S11) * _INV53
@@ -272,7 +272,7 @@ def hit_wall(params, i, ox, oy, oz, dx, dy, dz, tmin, tmax, seed, ray):
     return np.inf
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
 def hit_profile(params, i, ox, oy, oz, dx, dy, dz, tmin, tmax):
     """Terrain: a cross-section polyline in (y, z) extruded along x on a slope.
 
@@ -306,7 +306,7 @@ def hit_profile(params, i, ox, oy, oz, dx, dy, dz, tmin, tmax):
     return best if best < tmax else np.inf
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
 def intersect(kind, params, i, ox, oy, oz, dx, dy, dz, tmin, tmax, seed, ray):
     """Dispatch on the primitive kind."""
     if kind == PROFILE:
@@ -372,7 +372,7 @@ def grid_cells(aabb, in_grid, x0, y0, cell, nx, ny):
     return start, items, boxes, zrange
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
 def _clip(o, d, lo, hi, t0, t1):
     if abs(d) < _EPS:
         if o < lo or o > hi:
@@ -385,7 +385,7 @@ def _clip(o, d, lo, hi, t0, t1):
     return max(t0, ta), min(t1, tb)
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
 def _box_overlap(boxes, j, ox, oy, oz, ix, iy, iz, t0, t1):
     """Does the ray (inverse direction ix, iy, iz) meet box j within [t0, t1]?"""
     ta = (boxes[j, 0] - ox) * ix
@@ -409,7 +409,7 @@ def _box_overlap(boxes, j, ox, oy, oz, ix, iy, iz, t0, t1):
     return t0 <= t1
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
 def _box_exit(boxes, j, ox, oy, oz, ix, iy, iz, t0, t1):
     """Where the ray leaves box j within [t0, t1], or -1 if it misses it."""
     ta = (boxes[j, 0] - ox) * ix
@@ -427,7 +427,7 @@ def _box_exit(boxes, j, ox, oy, oz, ix, iy, iz, t0, t1):
     return t1 if t0 <= t1 else -1.0
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
 def _try(kind, params, hit, i, ox, oy, oz, dx, dy, dz, tmin, best, seed, ray):
     """Distance to primitive i if the ray is stopped by it before ``best``."""
     t = intersect(kind[i], params, i, ox, oy, oz, dx, dy, dz, tmin, best, seed, ray)
@@ -438,7 +438,27 @@ def _try(kind, params, hit, i, ox, oy, oz, dx, dy, dz, tmin, best, seed, ray):
     return t
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
+def _enter(ox, oy, dx, dy, t, x0, y0, cell, nx, ny):
+    """Grid walk state at distance t: cell, steps, next crossings, their steps."""
+    cx = min(max(int((ox + t * dx - x0) / cell), 0), nx - 1)
+    cy = min(max(int((oy + t * dy - y0) / cell), 0), ny - 1)
+    if dx > _EPS:
+        sx, nxt_x, dtx = 1, (x0 + (cx + 1) * cell - ox) / dx, cell / dx
+    elif dx < -_EPS:
+        sx, nxt_x, dtx = -1, (x0 + cx * cell - ox) / dx, -cell / dx
+    else:
+        sx, nxt_x, dtx = 0, np.inf, np.inf
+    if dy > _EPS:
+        sy, nxt_y, dty = 1, (y0 + (cy + 1) * cell - oy) / dy, cell / dy
+    elif dy < -_EPS:
+        sy, nxt_y, dty = -1, (y0 + cy * cell - oy) / dy, -cell / dy
+    else:
+        sy, nxt_y, dty = 0, np.inf, np.inf
+    return cx, cy, sx, sy, nxt_x, nxt_y, dtx, dty
+
+
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
 def cast(
     ox,
     oy,
@@ -461,6 +481,10 @@ def cast(
     items,
     boxes,
     zrange,
+    coarse,
+    ncx,
+    czrange,
+    ahead,
     mailbox,
     ray,
     seed,
@@ -471,6 +495,10 @@ def cast(
     by most rays) are tested first, which bounds the walk through the grid.
     ``bounds`` is ``(x0, y0, z0, x1, y1, z1)`` of the grid (z: of all the
     primitives); ``mailbox[i] == ray`` marks primitives already tested.
+    Blocks of ``2**coarse`` x ``2**coarse`` cells (``ncx`` along x) have
+    the z range
+    of their items in ``czrange``: a ray passing above or below it crosses
+    the block in one step (rays to the sky walk few cells).
     """
     # inverse directions for the box tests (a huge number for a zero component)
     ix = 1.0 / dx if abs(dx) > _EPS else 1e300 * (1.0 if dx >= 0 else -1.0)
@@ -495,24 +523,51 @@ def cast(
     if t0 > t1:
         return best_i, best
     x0, y0 = bounds[0], bounds[1]
-    px = ox + t0 * dx
-    py = oy + t0 * dy
-    cx = min(max(int((px - x0) / cell), 0), nx - 1)
-    cy = min(max(int((py - y0) / cell), 0), ny - 1)
-    if dx > _EPS:
-        sx, nxt_x, dtx = 1, (x0 + (cx + 1) * cell - ox) / dx, cell / dx
-    elif dx < -_EPS:
-        sx, nxt_x, dtx = -1, (x0 + cx * cell - ox) / dx, -cell / dx
-    else:
-        sx, nxt_x, dtx = 0, np.inf, np.inf
-    if dy > _EPS:
-        sy, nxt_y, dty = 1, (y0 + (cy + 1) * cell - oy) / dy, cell / dy
-    elif dy < -_EPS:
-        sy, nxt_y, dty = -1, (y0 + cy * cell - oy) / dy, -cell / dy
-    else:
-        sy, nxt_y, dty = 0, np.inf, np.inf
+    cx, cy, sx, sy, nxt_x, nxt_y, dtx, dty = _enter(
+        ox, oy, dx, dy, t0, x0, y0, cell, nx, ny
+    )
+    span = cell * (1 << coarse)
     t_enter = t0
+    last = -1
     while True:
+        # a coarse cell whose items the ray passes above or below is crossed
+        # in one step
+        cc = (cy >> coarse) * ncx + (cx >> coarse)
+        if cc != last:
+            last = cc
+            t_out = min(t1, best)
+            if dx > _EPS:
+                t_out = min(t_out, (x0 + ((cx >> coarse) + 1) * span - ox) / dx)
+            elif dx < -_EPS:
+                t_out = min(t_out, (x0 + (cx >> coarse) * span - ox) / dx)
+            if dy > _EPS:
+                t_out = min(t_out, (y0 + ((cy >> coarse) + 1) * span - oy) / dy)
+            elif dy < -_EPS:
+                t_out = min(t_out, (y0 + (cy >> coarse) * span - oy) / dy)
+            za = oz + t_enter * dz
+            # above everything ahead and rising, or below and falling: done
+            q = (2 if dx < 0.0 else 0) + (1 if dy < 0.0 else 0)
+            if (dz >= 0.0 and za > ahead[q, cc, 1]) or (
+                dz <= 0.0 and za < ahead[q, cc, 0]
+            ):
+                break
+            zb = oz + t_out * dz
+            if max(za, zb) < czrange[cc, 0] or min(za, zb) > czrange[cc, 1]:
+                if t_out >= min(t1, best):
+                    break
+                t_next = t_out + 1e-7
+                px = ox + t_next * dx
+                py = oy + t_next * dy
+                if not (x0 <= px < x0 + nx * cell and y0 <= py < y0 + ny * cell):
+                    break
+                jx, jy, sx, sy, nxt_x, nxt_y, dtx, dty = _enter(
+                    ox, oy, dx, dy, t_next, x0, y0, cell, nx, ny
+                )
+                if (jy >> coarse) * ncx + (jx >> coarse) != cc:
+                    cx, cy, t_enter = jx, jy, t_out
+                    continue
+                # rounding kept the ray in the same coarse cell: walk it
+                cx, cy = jx, jy
         c = cy * nx + cx
         t_exit = min(nxt_x, nxt_y)
         # the ray's heights in the cell, against those of the cell's items
@@ -571,7 +626,7 @@ AERIAL_ROW = 9
 # ft of UGV: cos, sin of the azimuths (n_azimuths x 2)
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
 def pulse_ray(code, fp, fa, ft, k):
     """``(ok, ox, oy, oz, dx, dy, dz, time, channel)`` of pulse ``k``."""
     if code == MOBILE:
@@ -629,14 +684,17 @@ def pulse_ray(code, fp, fa, ft, k):
     return True, fp[0], fp[1], fp[2], ce * ft[2 * f], ce * ft[2 * f + 1], se, time, b
 
 
-@njit(cache=True, nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
 def _gauss(gauss, h, shift):
     """A standard normal number: 16 bits of a hash index a table of quantiles."""
     return gauss[(h >> np.uint64(shift)) & np.uint64(0xFFFF)]
 
 
-# _nrt=False: no reference counting of the arrays in the loop (the kernel
-# allocates nothing); it costs a third of the time otherwise
+# Speed: the kernels allocate nothing and are compiled with _nrt=False, so
+# that no reference counting of the array arguments happens on each call
+# (a third of the time otherwise); the walk (cast) and the small helpers are
+# inlined into the loop (another third), the intersections are not (they
+# would multiply the compile time by five for a few per cent).
 @njit(cache=True, nogil=True, _nrt=False)
 def simulate(
     code,
@@ -665,6 +723,10 @@ def simulate(
     items,
     boxes,
     zrange,
+    coarse,
+    ncx,
+    czrange,
+    ahead,
     mailbox,
     interest,
     out_xyz,
@@ -672,6 +734,9 @@ def simulate(
     out_range,
     out_time,
     out_channel,
+    out_return,
+    max_returns,
+    separation,
 ):
     """Cast pulses ``k0 .. k1 - 1``; returns the number of returns written.
 
@@ -680,7 +745,10 @@ def simulate(
     with probability ``1 - drop`` and its range perturbed by Gaussian
     ``noise`` (metres) along the ray. ``gauss`` holds the standard normal
     quantiles at ``(i + 0.5) / 65536``; one 64-bit hash per pulse gives the
-    four normal numbers of its jitter and noise.
+    four normal numbers of its jitter and noise. Up to ``max_returns``
+    echoes per pulse (at most 8): after a hit on a primitive of hit
+    probability below 1 the beam goes on from ``separation`` metres behind
+    it; ``out_return`` is the echo's number along the beam, from 1.
 
     A non-empty ``interest`` (boxes ``(m, 6)``) skips the rays that meet
     none of these boxes within range and ends the others where they leave
@@ -725,46 +793,66 @@ def simulate(
                 )
             if t_end < 0.0:
                 continue
-        i, t = cast(
-            ox,
-            oy,
-            oz,
-            dx,
-            dy,
-            dz,
-            min_range,
-            t_end,
-            kind,
-            params,
-            hit,
-            aabb,
-            glob,
-            bounds,
-            cell,
-            nx,
-            ny,
-            start,
-            items,
-            boxes,
-            zrange,
-            mailbox,
-            k,
-            seed,
-        )
-        if i < 0:
-            continue
-        if drop > 0.0 and uniform(seed, k, SALT_DROP) < drop:
-            continue
-        if noise > 0.0:
-            t += noise * _gauss(gauss, h, 48)
-        out_xyz[n, 0] = ox + t * dx
-        out_xyz[n, 1] = oy + t * dy
-        out_xyz[n, 2] = oz + t * dz
-        out_prim[n] = i
-        out_range[n] = t
-        out_time[n] = time
-        out_channel[n] = channel
-        n += 1
+        # the echoes of the pulse: behind a partly transparent primitive
+        # (foliage, glass, mesh) the beam goes on and may return again
+        t_from = min_range
+        ray_id = k
+        for r in range(max_returns):
+            i, t = cast(
+                ox,
+                oy,
+                oz,
+                dx,
+                dy,
+                dz,
+                t_from,
+                t_end,
+                kind,
+                params,
+                hit,
+                aabb,
+                glob,
+                bounds,
+                cell,
+                nx,
+                ny,
+                start,
+                items,
+                boxes,
+                zrange,
+                coarse,
+                ncx,
+                czrange,
+                ahead,
+                mailbox,
+                ray_id,
+                seed,
+            )
+            if i < 0:
+                break
+            if drop <= 0.0 or uniform(seed, k, SALT_DROP + 16 * r) >= drop:
+                if noise > 0.0:
+                    if r == 0:
+                        g = _gauss(gauss, h, 48)
+                    else:
+                        g = _gauss(gauss, hash64(seed, k, SALT_NOISE + 16 * r), 0)
+                    tr = t + noise * g
+                else:
+                    tr = t
+                out_xyz[n, 0] = ox + tr * dx
+                out_xyz[n, 1] = oy + tr * dy
+                out_xyz[n, 2] = oz + tr * dz
+                out_prim[n] = i
+                out_range[n] = tr
+                out_time[n] = time
+                out_channel[n] = channel
+                out_return[n] = r + 1
+                n += 1
+            if hit[i] >= 1.0:
+                break
+            t_from = t + separation
+            # ids of later echoes: negative, never a pulse number nor -1
+            ray_id = -(k * 8 + r + 1) - 2
     return n
 
 
@@ -788,6 +876,10 @@ def cast_rays(
     items,
     boxes,
     zrange,
+    coarse,
+    ncx,
+    czrange,
+    ahead,
     mailbox,
     out_prim,
     out_t,
@@ -820,6 +912,10 @@ def cast_rays(
             items,
             boxes,
             zrange,
+            coarse,
+            ncx,
+            czrange,
+            ahead,
             mailbox,
             r,
             seed,

@@ -15,6 +15,7 @@ from scipy.special import ndtri
 
 from skpcd.datasets._street._raycast import (
     AERIAL,
+    CYLINDER,
     MOBILE,
     MOBILE_ROW,
     PROFILE,
@@ -46,6 +47,9 @@ SCAN_PATTERNS = {
         "max_range": 100.0,  # m
         "range_noise": 0.008,  # m, standard deviation
         "beam_divergence": 1.5e-4,  # rad, standard deviation of the ray jitter
+        "footprint": 0.0,  # m, added to the radius of cylinders (beam width)
+        "max_returns": 1,  # echoes per pulse
+        "return_separation": 1.0,  # m, least distance between two echoes
     },
     # Airborne swath (DALES-like: Riegl Q1560 at 1300 m): straight parallel
     # scan lines across track, several overlapping flight lines along the
@@ -53,14 +57,21 @@ SCAN_PATTERNS = {
     "aerial": {
         "altitude": 1300.0,  # m above the road at x = 0
         "speed": 72.0,  # m/s
-        "density": 10.0,  # pulses per m2 at nadir, each flight line
+        "density": 8.0,  # pulses per m2 at nadir, each flight line
         "field_of_view": 58.0,  # full scan angle, deg
-        "line_offsets": (-250.0, 250.0, -80.0, 80.0),  # y of the flight lines, m
+        # y of the flight lines, m: the street seen from 0 to 23 degrees off
+        # nadir, from both sides
+        "line_offsets": (-550.0, -250.0, 0.0, 250.0, 550.0),
         "tilt": 0.0,  # forward look of the scan plane, deg
         "min_range": 10.0,
         "max_range": 3000.0,
         "range_noise": 0.02,
         "beam_divergence": 1.25e-4,
+        # half the width of a 0.25 mrad beam at 1300 m: thin poles and wires
+        # return from a partial footprint, so they look that much wider
+        "footprint": 0.15,
+        "max_returns": 4,
+        "return_separation": 1.0,
     },
     # A spinning 32-beam sensor (HDL-32E-like vertical angles) on a small
     # ground vehicle, one full sweep.
@@ -74,6 +85,9 @@ SCAN_PATTERNS = {
         "max_range": 100.0,
         "range_noise": 0.02,
         "beam_divergence": 1.0e-3,
+        "footprint": 0.0,
+        "max_returns": 1,
+        "return_separation": 1.0,
     },
 }
 
@@ -97,7 +111,16 @@ def resolve_pattern(scanner, scanner_params=None, **overrides):
                 f"known: {sorted(conf)}"
             )
         conf[key] = value
-    for key in ("min_range", "max_range", "range_noise", "beam_divergence"):
+    if not 1 <= int(conf["max_returns"]) <= 8:
+        raise ValueError(f"max_returns must be 1 to 8, got {conf['max_returns']}")
+    for key in (
+        "min_range",
+        "max_range",
+        "range_noise",
+        "beam_divergence",
+        "footprint",
+        "return_separation",
+    ):
         if not float(conf[key]) >= 0:
             raise ValueError(f"{key} must be non-negative, got {conf[key]}")
     if not float(conf["max_range"]) > float(conf["min_range"]):
@@ -240,11 +263,31 @@ def plan_scan(scanner, conf, street):
     }
 
 
-def build_grid(scene, cell=1.0, global_cells=400):
+def widen_cylinders(scene, footprint):
+    """The scene with ``footprint`` added to the radius of every cylinder.
+
+    A beam of finite width returns from a pole or a wire as soon as its
+    footprint touches it, at the range of the pole: the pole looks wider by
+    the footprint's radius. Returns the scene itself for ``footprint=0``.
+    """
+    if not footprint > 0:
+        return scene
+    out = dict(scene)
+    cyl = scene["kind"] == CYLINDER
+    out["params"] = scene["params"].copy()
+    out["params"][cyl, 6:8] += footprint
+    out["aabb"] = scene["aabb"].copy()
+    out["aabb"][cyl, :3] -= footprint
+    out["aabb"][cyl, 3:] += footprint
+    return out
+
+
+def build_grid(scene, cell=1.0, global_cells=400, coarse=3):
     """Uniform grid over the scene's primitives: a dict of kernel arrays.
 
     The terrain profile and primitives covering more than ``global_cells``
-    cells are not listed in the cells: every ray tests them first.
+    cells are not listed in the cells: every ray tests them first. Blocks of
+    ``2**coarse`` cells a side carry the z range of their items.
     """
     aabb = scene["aabb"]
     lo, hi = aabb[:, :3].min(axis=0) - 0.01, aabb[:, 3:].max(axis=0) + 0.01
@@ -258,6 +301,25 @@ def build_grid(scene, cell=1.0, global_cells=400):
     start, items, boxes, zrange = grid_cells(
         aabb, ~is_global, bounds[0], bounds[1], float(cell), nx, ny
     )
+    # z range of blocks of 2**coarse x 2**coarse cells
+    block = 1 << coarse
+    ncx, ncy = -(-nx // block), -(-ny // block)
+    pad = np.full((ncy * block, ncx * block, 2), [np.inf, -np.inf])
+    pad[:ny, :nx] = zrange.reshape(ny, nx, 2)
+    blocks = pad.reshape(ncy, block, ncx, block, 2)
+    czrange = np.empty((ncy * ncx, 2))
+    czrange[:, 0] = blocks[..., 0].min(axis=(1, 3)).ravel()
+    czrange[:, 1] = blocks[..., 1].max(axis=(1, 3)).ravel()
+    # z range of all blocks ahead, per quadrant of direction (x+ y+, x+ y-,
+    # x- y+, x- y-): running minima and maxima from the far corner
+    lo = czrange[:, 0].reshape(ncy, ncx)
+    hi = czrange[:, 1].reshape(ncy, ncx)
+    ahead = np.empty((4, ncy * ncx, 2))
+    for q, (fx, fy) in enumerate(((1, 1), (1, -1), (-1, 1), (-1, -1))):
+        for k, (z, acc) in enumerate(((lo, np.minimum), (hi, np.maximum))):
+            a = z[::fy, ::fx]
+            a = acc.accumulate(acc.accumulate(a[::-1, ::-1], axis=0), axis=1)
+            ahead[q, :, k] = a[::-1, ::-1][::fy, ::fx].ravel()
     return {
         "glob": np.flatnonzero(is_global).astype(np.int64),
         "bounds": bounds,
@@ -268,6 +330,10 @@ def build_grid(scene, cell=1.0, global_cells=400):
         "items": items,
         "boxes": boxes,
         "zrange": zrange,
+        "coarse": int(coarse),
+        "ncx": int(ncx),
+        "czrange": czrange,
+        "ahead": np.ascontiguousarray(ahead),
     }
 
 
@@ -280,12 +346,13 @@ class _Buffers:
         self.range = np.empty(n)
         self.time = np.empty(n)
         self.channel = np.empty(n, dtype=np.int64)
+        self.ret = np.empty(n, dtype=np.int64)
         self.mailbox = np.full(n_prims, -1, dtype=np.int64)
 
 
 def _chunks(plan, conf, scene, grid, seed, drop, interest, spans, chunk):
     """Cast the pulses of the ``(k0, k1)`` spans one after the other."""
-    buf = _Buffers(chunk, len(scene["kind"]))
+    buf = _Buffers(chunk * int(conf["max_returns"]), len(scene["kind"]))
     out = []
     for k0, k1 in spans:
         m = simulate(
@@ -315,6 +382,10 @@ def _chunks(plan, conf, scene, grid, seed, drop, interest, spans, chunk):
             grid["items"],
             grid["boxes"],
             grid["zrange"],
+            grid["coarse"],
+            grid["ncx"],
+            grid["czrange"],
+            grid["ahead"],
             buf.mailbox,
             interest,
             buf.xyz,
@@ -322,6 +393,9 @@ def _chunks(plan, conf, scene, grid, seed, drop, interest, spans, chunk):
             buf.range,
             buf.time,
             buf.channel,
+            buf.ret,
+            int(conf["max_returns"]),
+            float(conf["return_separation"]),
         )
         out.append(
             (
@@ -330,6 +404,7 @@ def _chunks(plan, conf, scene, grid, seed, drop, interest, spans, chunk):
                 buf.range[:m].copy(),
                 buf.time[:m].copy(),
                 buf.channel[:m].copy(),
+                buf.ret[:m].copy(),
             )
         )
     return out
@@ -347,7 +422,7 @@ def scan(
     chunk=1 << 18,
     n_jobs=None,
 ):
-    """Cast every pulse of the plan: ``xyz, primitive, range, time, channel``.
+    """Cast every pulse: ``xyz, primitive, range, time, channel, return``.
 
     ``interest``: boxes ``(m, 6)``; rays meeting none of them are not cast.
 
@@ -375,8 +450,7 @@ def scan(
             parts = [p for f in futures for p in f.result()]
     else:
         parts = _chunks(*args, spans, chunk)
-    xyz, prim, rng, time, channel = (np.concatenate(a) for a in zip(*parts))
-    return xyz, prim, rng, time, channel
+    return tuple(np.concatenate(a) for a in zip(*parts))
 
 
 def first_hits(scene, origins, directions, *, tmin=0.0, tmax=np.inf, seed=0, grid=None):
@@ -410,6 +484,10 @@ def first_hits(scene, origins, directions, *, tmin=0.0, tmax=np.inf, seed=0, gri
         grid["items"],
         grid["boxes"],
         grid["zrange"],
+        grid["coarse"],
+        grid["ncx"],
+        grid["czrange"],
+        grid["ahead"],
         np.full(len(scene["kind"]), -1, dtype=np.int64),
         prim,
         t,

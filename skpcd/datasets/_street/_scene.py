@@ -25,6 +25,7 @@ from skpcd.datasets._street._scanners import (
     plan_scan,
     resolve_pattern,
     scan,
+    widen_cylinders,
 )
 
 __all__ = [
@@ -63,11 +64,12 @@ def _seeds(random_state):
 
 def _simulate(street, scene, scanner, conf, seed, drop, n_jobs, interest=None):
     plan = plan_scan(scanner, conf, street)
+    scene = widen_cylinders(scene, float(conf["footprint"]))
     grid = build_grid(scene)
-    xyz, prim, ranges, times, channels = scan(
+    out = scan(
         plan, conf, scene, grid, seed, drop=drop, interest=interest, n_jobs=n_jobs
     )
-    return plan, xyz, prim, ranges, times, channels
+    return (plan, *out)
 
 
 _SCENE_PARAMS = {
@@ -229,7 +231,7 @@ def make_street_scene(
     street = Street(layout_rng, length, slope)
     plan = furnish(street, layout_rng)
     scene, frame = build_scene(street, plan, layout_rng)
-    traj_plan, xyz, prim, ranges, times, channels = _simulate(
+    traj_plan, xyz, prim, ranges, times, channels, returns = _simulate(
         street, scene, scanner, conf, seed, drop, n_jobs
     )
     return Bunch(
@@ -241,6 +243,7 @@ def make_street_scene(
         ranges=ranges,
         times=times,
         channels=channels,
+        return_numbers=returns,
         ground_height=street.ground_height,
         scanner={"pattern": scanner, **conf},
         street=_describe(street),
@@ -422,7 +425,7 @@ def make_street_objects(
         boxes[:, :2] -= ground_margin + 0.05
         boxes[:, 3:5] += ground_margin + 0.05
         boxes[:, 2] -= 0.5
-        _, xyz, prim, _, _, _ = _simulate(
+        _, xyz, prim, *_ = _simulate(
             street, scene, scanner, conf, seed, 0.0, n_jobs, interest=boxes
         )
         inst = scene["instance"][prim]
