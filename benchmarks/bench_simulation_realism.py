@@ -3,8 +3,9 @@
 1. Aerial: streets of :func:`~skpcd.datasets.make_street_scene` scanned with
    the ``"aerial"`` pattern (its defaults: four flight lines at 1300 m, about
    40 pulses per m2), cut by true instance into the five DALES classes
-   (facade -> building; pole, street_light, lamp_post, traffic_light,
-   pedestrian_signal and traffic_sign -> pole; car; fence; tree), objects
+   (facade -> building; pole, street_light, lamp_post and traffic_light ->
+   pole, as DALES's poles are utility and light poles; car; fence; tree;
+   the other classes are left out), objects
    of at least ``--min-points`` returns. Compared with the 399 real DALES
    objects (``load_dales_objects``) on point count, height (z extent) and
    point spacing (:func:`skpcd.preprocessing.point_spacing`, the median
@@ -54,8 +55,6 @@ TO_DALES = {
     "street_light": "pole",
     "lamp_post": "pole",
     "traffic_light": "pole",
-    "pedestrian_signal": "pole",
-    "traffic_sign": "pole",
 }
 CLASSES = ("building", "car", "fence", "pole", "tree")
 
