@@ -131,9 +131,10 @@ def make_street_scene(
           (720 000 pulses per second and scanner), a 40 degree cone below
           the scanners hidden by the vehicle, 1-100 m range, 8 mm noise.
         - ``"aerial"``: parallel scan lines across track from 1300 m at
-          72 m/s, four flight lines 80 and 250 m either side of the street
-          flown in alternate directions, 10 pulses per m2 each at nadir
-          (DALES-like: about 40 per m2 in total), 2 cm noise.
+          72 m/s, five flight lines along the street (y = 0, +-250 and
+          +-550 m) flown in alternate directions, 8 pulses per m2 each at
+          nadir (DALES-like: about 40 per m2 in total), up to 4 echoes per
+          pulse, 2 cm noise, a 0.15 m beam footprint added to cylinders.
         - ``"ugv"``: one sweep of a spinning 32-beam sensor 1.8 m above
           the road in the middle of the street (HDL-32E vertical angles
           -30.67 to +10.67 degrees, 0.16 degree azimuth step), 1-100 m
@@ -184,8 +185,9 @@ def make_street_scene(
           mid-point), ``yaw``, ``height`` and ``params`` (the shape
           parameters drawn).
         - ``ranges`` (float64), ``times`` (float64, seconds from the start
-          of the survey) and ``channels`` (int64: scanner, flight line or
-          beam) of each return.
+          of the survey), ``channels`` (int64: scanner, flight line or
+          beam) and ``return_numbers`` (int64, the echo's number along its
+          beam, from 1) of each return.
         - ``ground_height``: callable ``(x, y) -> z`` of the exact ground.
         - ``scanner``: the pattern's name and numbers used; ``street``: the
           cross-section drawn; ``primitives``: the analytic scene (dict of
@@ -203,11 +205,14 @@ def make_street_scene(
     cells of a 1 m grid that it crosses, in order, stopping at the first
     hit: occlusion is exact. Foliage clusters, car windows, fence mesh and
     window glass are hit with a probability per primitive and otherwise let
-    the ray through. Wires are given an effective radius of 2 cm, because a
-    real beam several centimetres wide returns from wires thinner than
-    that. What the simulation does not model (intensity, multiple returns,
-    mixed pixels at edges, moving objects, trajectory errors) is listed in
-    the user guide.
+    the ray through (and with ``max_returns > 1`` the beam goes on behind
+    them for further echoes). Wires are given an effective radius of 2 cm,
+    because a real beam several centimetres wide returns from wires
+    thinner than that; the aerial pattern adds its footprint (0.15 m) to
+    every cylinder for the same reason. What the simulation does not model
+    (intensity, full waveform, mixed pixels at edges, noise points, moving
+    objects, trajectory errors) is listed in the user guide, with a
+    comparison against the DALES objects.
 
     Examples
     --------
