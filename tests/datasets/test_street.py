@@ -407,3 +407,15 @@ def test_objects_ground_margin_adds_only_ground_at_the_foot():
         extra = b[len(a) :]
         if len(extra):
             assert extra[:, 2].max() < a[:, 2].min() + 0.5
+
+
+def test_a_class_the_scanner_cannot_see_is_a_clear_error():
+    # signs are too small to get 50 returns from 1300 m
+    with pytest.raises(RuntimeError, match="traffic_sign"):
+        make_street_objects(
+            1,
+            classes=["traffic_sign"],
+            scanner="aerial",
+            segment_length=20.0,
+            random_state=0,
+        )

@@ -385,6 +385,12 @@ def make_street_objects(
     labels : ndarray of str of shape (n_per_class * n_classes,)
         The class of each object.
 
+    Raises
+    ------
+    RuntimeError
+        If a class gets no visible object in five streets (small objects
+        seen from the air), or fewer than ``n_per_class`` in many.
+
     See Also
     --------
     make_street_scene : The whole scan, with per-point truth.
@@ -415,6 +421,13 @@ def make_street_objects(
         need = {c: n - len(v) for c, v in found.items() if len(v) < n}
         if not need:
             break
+        unseen = sorted(c for c in need if not found[c])
+        if k >= 5 and unseen:
+            raise RuntimeError(
+                f"no object of {unseen} got {min_points} returns in {k} "
+                f"simulated streets with the {scanner!r} pattern: lower "
+                "min_points, or use another scanner"
+            )
         layout_rng = np.random.RandomState(rng.randint(0, 2**31 - 1))
         seed = int(rng.randint(0, 2**31 - 1))
         street = Street(layout_rng, segment_length)
