@@ -19,7 +19,12 @@ import itertools
 
 import numpy as np
 
-from skpcd.datasets._street._catalogue import BUILDERS, building, wire
+from skpcd.datasets._street._catalogue import (
+    BUILDERS,
+    OBJECT_CLASSES,
+    building,
+    wire,
+)
 from skpcd.datasets._street._primitives import (
     Parts,
     SceneArrays,
@@ -31,22 +36,7 @@ from skpcd.datasets._street._primitives import (
 
 __all__ = ["STREET_CLASSES", "Street", "build_scene", "furnish"]
 
-STREET_CLASSES = (
-    "ground",
-    "facade",
-    "wire",
-    "pole",
-    "lamp_post",
-    "street_light",
-    "traffic_light",
-    "pedestrian_signal",
-    "traffic_sign",
-    "tree",
-    "car",
-    "bush",
-    "other",
-    "fence",
-)
+STREET_CLASSES = ("ground", "facade", "wire", *OBJECT_CLASSES)
 CLASS_ID = {c: i for i, c in enumerate(STREET_CLASSES)}
 
 _MARGIN = 30.0  # ground beyond the ends of the street, m

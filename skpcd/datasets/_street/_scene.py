@@ -40,18 +40,7 @@ __all__ = [
 STREET_OBJECT_CLASSES = OBJECT_CLASSES
 
 # the classes it returns by default (all but fence)
-_DEFAULT_CLASSES = (
-    "pole",
-    "lamp_post",
-    "street_light",
-    "traffic_light",
-    "pedestrian_signal",
-    "traffic_sign",
-    "tree",
-    "car",
-    "bush",
-    "other",
-)
+_DEFAULT_CLASSES = tuple(c for c in OBJECT_CLASSES if c != "fence")
 
 _CLASS_NAMES = np.array(STREET_CLASSES, dtype=object)
 
