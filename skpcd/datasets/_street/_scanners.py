@@ -92,6 +92,30 @@ SCAN_PATTERNS = {
 }
 
 
+def _scene_arrays(scene, grid):
+    """The scene's primitive arrays and its grid, in the order the casting
+    kernels take them."""
+    return (
+        scene["kind"],
+        scene["params"],
+        scene["hit"],
+        scene["aabb"],
+        grid["glob"],
+        grid["bounds"],
+        grid["cell"],
+        grid["nx"],
+        grid["ny"],
+        grid["start"],
+        grid["items"],
+        grid["boxes"],
+        grid["zrange"],
+        grid["coarse"],
+        grid["ncx"],
+        grid["czrange"],
+        grid["ahead"],
+    )
+
+
 def resolve_pattern(scanner, scanner_params=None, **overrides):
     """The pattern's numbers: defaults, then ``scanner_params``, then overrides.
 
@@ -369,23 +393,7 @@ def _chunks(plan, conf, scene, grid, seed, drop, interest, spans, chunk):
             float(conf["range_noise"]),
             float(conf["beam_divergence"]),
             float(drop),
-            scene["kind"],
-            scene["params"],
-            scene["hit"],
-            scene["aabb"],
-            grid["glob"],
-            grid["bounds"],
-            grid["cell"],
-            grid["nx"],
-            grid["ny"],
-            grid["start"],
-            grid["items"],
-            grid["boxes"],
-            grid["zrange"],
-            grid["coarse"],
-            grid["ncx"],
-            grid["czrange"],
-            grid["ahead"],
+            *_scene_arrays(scene, grid),
             buf.mailbox,
             interest,
             buf.xyz,
@@ -471,23 +479,7 @@ def first_hits(scene, origins, directions, *, tmin=0.0, tmax=np.inf, seed=0, gri
         float(tmin),
         float(min(tmax, 1e30)),
         int(seed),
-        scene["kind"],
-        scene["params"],
-        scene["hit"],
-        scene["aabb"],
-        grid["glob"],
-        grid["bounds"],
-        grid["cell"],
-        grid["nx"],
-        grid["ny"],
-        grid["start"],
-        grid["items"],
-        grid["boxes"],
-        grid["zrange"],
-        grid["coarse"],
-        grid["ncx"],
-        grid["czrange"],
-        grid["ahead"],
+        *_scene_arrays(scene, grid),
         np.full(len(scene["kind"]), -1, dtype=np.int64),
         prim,
         t,
