@@ -71,6 +71,8 @@ TRUSTED_TYPES = (
     "skpcd.features._pfh.PFHTransformer",
     "skpcd.features._shape.ShapeFeatures",
     "skpcd.preprocessing._normals.NormalEstimator",
+    "skpcd.preprocessing._outliers.RadiusOutlierFilter",
+    "skpcd.preprocessing._outliers.StatisticalOutlierFilter",
     "skpcd.preprocessing._sampling.GridSampler",
     "skpcd.segmentation._clusters.EuclideanClusters",
     "skpcd.segmentation._dbscan.AutoEpsDBSCAN",
