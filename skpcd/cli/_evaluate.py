@@ -1,6 +1,7 @@
 """``skpcd evaluate [FOLDER]``: cross-validate a pipeline; ``skpcd score
 MODEL FOLDER``: how a saved model does on labelled segments."""
 
+import sys
 import time
 
 import numpy as np
@@ -63,6 +64,90 @@ def format_report(y_true, y_pred, fold_scores=None):
     return "\n".join(lines)
 
 
+# ``skpcd evaluate --data NAME`` without a folder: the scan pattern (None:
+# make_urban_objects), its overrides, the default --n-per-class and what is
+# printed. The mobile pattern is the Lynx-like one at half its angular and
+# temporal resolution (0.2 degree, 100 rotations per second: 4 times fewer
+# pulses, objects of 1 500 points at the median), so that the command stays
+# within a few minutes.
+_STREET_MOBILE = {"angular_step": 0.2, "rotation_rate": 100.0}
+DATA = {
+    "urban": (
+        None,
+        None,
+        40,
+        "embedded synthetic urban objects (make_urban_objects, aerial-like)",
+    ),
+    "street": (
+        "mobile",
+        _STREET_MOBILE,
+        20,
+        "street furniture from simulated mobile scans (make_street_objects, "
+        "Lynx-like profilers at 0.2 deg and 100 rotations/s)",
+    ),
+    "street-ugv": (
+        "ugv",
+        None,
+        20,
+        "street furniture from simulated UGV scans (make_street_objects, "
+        "one sweep of a 32-beam spinning sensor per street)",
+    ),
+}
+
+
+def simulated_data(name, n_per_class, random_state=0, n_jobs=None):
+    """The labelled objects of ``skpcd evaluate --data NAME``.
+
+    Parameters
+    ----------
+    name : {"urban", "street", "street-ugv"}
+        ``"urban"``: :func:`~skpcd.datasets.make_urban_objects` (five DALES
+        classes, sampled, aerial-like). ``"street"``: the ten default classes
+        of :func:`~skpcd.datasets.make_street_objects` cut from simulated
+        mobile scans; ``"street-ugv"``: the same from UGV sweeps.
+    n_per_class : int or None
+        Objects per class; None: the default of ``name``.
+    random_state : int, default=0
+        Seeds the objects.
+    n_jobs : int, default=None
+        Threads casting rays (the objects do not depend on it).
+
+    Returns
+    -------
+    clouds : list of ndarray
+        The objects.
+    labels : ndarray of str
+        Their classes.
+    source : str
+        What the data is, as printed.
+    """
+    scanner, params, default_n, source = DATA[name]
+    n = default_n if n_per_class is None else int(n_per_class)
+    if scanner is None:
+        from skpcd.datasets import make_urban_objects
+
+        clouds, labels = make_urban_objects(n_per_class=n, random_state=random_state)
+        return clouds, labels, source
+    from skpcd.datasets import make_street_objects
+    from skpcd.datasets._street import kernels_cached
+
+    if not kernels_cached():
+        print(
+            "skpcd evaluate: compiling the street simulator's numba kernels "
+            "(once per installation, about a minute)",
+            file=sys.stderr,
+            flush=True,
+        )
+    clouds, labels = make_street_objects(
+        n,
+        scanner=scanner,
+        scanner_params=params,
+        random_state=random_state,
+        n_jobs=n_jobs,
+    )
+    return clouds, labels, source
+
+
 def add_pipeline_option(parser):
     from skpcd.classification import PIPELINES
 
@@ -82,12 +167,28 @@ def add_parsers(sub):
         "--pipeline)",
         description="Cross-validate the default pipeline on labelled segments and "
         "print per-class precision/recall and a confusion matrix. Without FOLDER it "
-        "runs on the embedded synthetic urban objects.",
+        "runs on simulated objects generated on the fly (--data).",
     )
     ev.add_argument("folder", nargs="?", help="folder of per-segment files")
     add_pipeline_option(ev)
     ev.add_argument(
         "--labels", help="CSV of file,label rows (default: FOLDER/labels.csv)"
+    )
+    ev.add_argument(
+        "--data",
+        choices=tuple(DATA),
+        default=None,
+        help="without FOLDER, the simulated objects to run on: urban (default; "
+        "make_urban_objects, 5 aerial-like classes, 40 per class), street (10 "
+        "classes of street furniture, trees, cars cut from simulated mobile "
+        "scans, 20 per class; the first run compiles the simulator for about a "
+        "minute) or street-ugv (the same from UGV sweeps)",
+    )
+    ev.add_argument(
+        "--n-per-class",
+        type=int,
+        default=None,
+        help="objects per class of --data (default: 40 urban, 20 street)",
     )
     ev.add_argument("--folds", type=int, default=5, help="number of folds (default 5)")
     ev.add_argument("--repeats", type=int, default=1, help="CV repetitions (default 1)")
@@ -127,7 +228,26 @@ def run_evaluate(args):
             f"--folds must be at least 2 and --repeats at least 1, got {args.folds} "
             f"and {args.repeats}",
         )
-    clouds, y, source, _ = load_labelled(args)
+    if args.folder is None:
+        if args.n_per_class is not None and args.n_per_class < 1:
+            raise CommandError(
+                "evaluate", f"--n-per-class must be at least 1, got {args.n_per_class}"
+            )
+        clouds, y, source = simulated_data(
+            args.data or "urban",
+            args.n_per_class,
+            random_state=args.random_state,
+            n_jobs=args.n_jobs,
+        )
+        source = f"{args.data or 'urban'}: {source}"
+    elif args.data is not None or args.n_per_class is not None:
+        raise CommandError(
+            "evaluate",
+            "--data and --n-per-class choose simulated objects; they do not "
+            "apply with a FOLDER",
+        )
+    else:
+        clouds, y, source, _ = load_labelled(args)
     classes, counts = np.unique(y, return_counts=True)
     if len(classes) < 2:
         raise CommandError(

@@ -49,6 +49,42 @@ def test_evaluate_needs_enough_segments_per_class(tmp_path):
         main(["evaluate", str(tmp_path)])
 
 
+def test_evaluate_street_data(capsys, monkeypatch):
+    import skpcd.datasets._street as street
+
+    # as on a fresh installation: one line on stderr says the kernels compile
+    monkeypatch.setattr(street, "kernels_cached", lambda: False)
+    argv = ["evaluate", "--data", "street", "--n-per-class", "3", "--folds", "2"]
+    assert main([*argv, "--quiet"]) == 0
+    out, err = capsys.readouterr()
+    assert "data      street: street furniture from simulated mobile scans" in out
+    assert "30 segments, 10 classes" in out
+    for cls in ("street_light", "traffic_sign", "pedestrian_signal", "tree", "car"):
+        assert cls in out
+    assert err.count("compiling") == 1
+
+
+def test_evaluate_urban_n_per_class(capsys):
+    argv = ["evaluate", "--data", "urban", "--n-per-class", "4", "--folds", "2"]
+    assert main([*argv, "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "data      urban: embedded synthetic urban objects" in out
+    assert "20 segments, 5 classes" in out
+
+
+@pytest.mark.parametrize(
+    "options", [["--data", "street"], ["--n-per-class", "5"]], ids=["data", "n"]
+)
+def test_evaluate_simulated_data_options_need_no_folder(tmp_path, options):
+    with pytest.raises(SystemExit, match="do not apply with a FOLDER"):
+        main(["evaluate", str(tmp_path), *options])
+
+
+def test_evaluate_n_per_class_must_be_positive():
+    with pytest.raises(SystemExit, match="--n-per-class must be at least 1"):
+        main(["evaluate", "--n-per-class", "0"])
+
+
 def test_format_report_confusion_matrix():
     text = format_report(
         np.array(["a", "a", "b"]), np.array(["a", "b", "b"]), [1.0, 0.5]
