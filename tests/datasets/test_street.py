@@ -341,6 +341,64 @@ def test_aerial_density_is_dales_like():
     assert air.trajectory[:, 2].min() > 1000
 
 
+def test_aerial_footprint_widens_thin_parts_and_porous_ones_echo_more():
+    from skpcd.datasets._street._scanners import GRAIN, apply_footprint
+    from skpcd.datasets._street._scene import _porous
+
+    arrays = SceneArrays()
+    arrays.add(Parts().cylinder((0, 0, 0), (0, 0, 5), 0.1), 0, CLASS_ID["pole"])
+    mesh = Parts().box((5, 0, 1), (0.02, 3, 1), hit=0.3)
+    arrays.add(mesh, 1, CLASS_ID["fence"])
+    glass = Parts().box((10, 0, 1), (1, 2, 0.5), hit=0.5)
+    arrays.add(glass, 2, CLASS_ID["car"])
+    crown = Parts().ellipsoid((15, 0, 3), (1, 1, 1), hit=0.35)
+    arrays.add(crown, 3, CLASS_ID["tree"])
+    scene = arrays.pack()
+    porous = _porous(scene)
+    np.testing.assert_array_equal(porous, [False, True, False, True])
+    assert apply_footprint(scene, 0.0, porous) is scene  # the mobile pattern
+    wide = apply_footprint(scene, 0.15, porous)
+    np.testing.assert_allclose(wide["params"][0, 6:8], 0.25)  # the pole's radii
+    # the mesh panel widened across its thickness only, its box with it
+    np.testing.assert_allclose(wide["params"][1, 3:6], [0.17, 3, 1])
+    np.testing.assert_allclose(wide["aabb"][1], [4.83, -3, 0, 5.17, 3, 2])
+    np.testing.assert_array_equal(wide["params"][2], scene["params"][2])
+    # porous: an echo when any of the footprint's patches meets material
+    n = np.pi * 0.15**2 / GRAIN**2
+    np.testing.assert_allclose(
+        wide["hit"][[1, 3]], 1 - (1 - np.array([0.3, 0.35])) ** n
+    )
+    assert wide["hit"][2] == 0.5 and (wide["hit"] < 1).sum() == 3  # glass as it was
+    assert scene["params"][0, 6] == 0.1 and scene["hit"][1] == 0.3  # not modified
+
+
+def test_aerial_channels_look_forward_and_back():
+    # from a flight line right above the street, the shaft of a vertical pole
+    # is seen by scan planes tilted along the track, from its front and back
+    kw = {"scanner": "aerial", "beam_divergence": 0.0, "random_state": 2}
+    one = {"line_offsets": (0.0,), "density": 100.0}
+    sides = []
+    for tilts in [(0.0,), (8.0, -8.0)]:
+        air = make_street_scene(
+            40.0, scanner_params={**one, "channel_tilts": tilts}, **kw
+        )
+        assert np.unique(air.channels).size == len(tilts)
+        front = back = 0
+        for f in air.frame:
+            if f["class"] not in ("pole", "lamp_post", "street_light", "traffic_light"):
+                continue
+            x, _, z = f["position"]
+            pts = air.points[air.instances == f["id"]]
+            near = np.hypot(*(pts[:, :2] - f["position"][:2]).T) < 0.3  # no arms
+            low = (pts[:, 2] > z + 0.5) & (pts[:, 2] < z + 0.5 * f["height"])
+            shaft = pts[near & low]
+            front += (shaft[:, 0] > x + 0.05).sum()
+            back += (shaft[:, 0] < x - 0.05).sum()
+        sides.append((front, back))
+    # untilted: only the slanted sides of tapered poles
+    assert min(sides[1]) > 20 and sum(sides[1]) > 3 * sum(sides[0]) + 10, sides
+
+
 def test_bad_parameters():
     with pytest.raises(ValueError, match="unknown parameter"):
         make_street_scene(10.0, scanner_params={"speeed": 3.0})

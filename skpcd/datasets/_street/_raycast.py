@@ -615,10 +615,11 @@ MOBILE, AERIAL, UGV = 0, 1, 2
 #   time offset
 # ft of MOBILE: cos, sin of the angle of pulse j in the rotation (n_per x 2)
 MOBILE_ROW = 6
-# fp of AERIAL: altitude, speed, line_rate, tilt, n_passes
-# fa of AERIAL, one row of AERIAL_ROW per pass: y of the line, heading (+1,
-#   -1), x at the first line, first row of ft, (unused), pulses per line,
-#   number of lines, first pulse of the pass, time offset
+# fp of AERIAL: altitude, speed, line_rate, (unused), n_passes
+# fa of AERIAL, one row of AERIAL_ROW per pass (a channel of a flight line):
+#   y of the line, heading (+1, -1), x at the first line, first row of ft,
+#   forward tilt of the scan plane (rad), pulses per line, number of lines,
+#   first pulse of the pass, time offset
 # ft of AERIAL: sin, cos of the scan angles of every pass, one after another
 AERIAL_ROW = 9
 # fp of UGV: x, y, z, n_azimuths, rate
@@ -672,8 +673,9 @@ def pulse_ray(code, fp, fa, ft, k):
         ox = fa[row + 2] + heading * fp[1] * t_line
         oy = fa[row + 0]
         oz = fp[0]
-        ct = math.cos(fp[3])
-        dx = heading * math.sin(fp[3])
+        tilt = fa[row + 4]
+        ct = math.cos(tilt)
+        dx = heading * math.sin(tilt)
         return True, ox, oy, oz, dx, sb * ct, -cb * ct, t_line + fa[row + 8], p
     # UGV
     nb = fa.shape[0] // 2

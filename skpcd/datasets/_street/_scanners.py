@@ -15,6 +15,7 @@ from scipy.special import ndtri
 
 from skpcd.datasets._street._raycast import (
     AERIAL,
+    BOX,
     CYLINDER,
     MOBILE,
     MOBILE_ROW,
@@ -51,18 +52,22 @@ SCAN_PATTERNS = {
         "max_returns": 1,  # echoes per pulse
         "return_separation": 1.0,  # m, least distance between two echoes
     },
-    # Airborne swath (DALES-like: Riegl Q1560 at 1300 m): straight parallel
-    # scan lines across track, several overlapping flight lines along the
-    # street flown in alternate directions.
+    # Airborne swath (DALES-like: Riegl Q1560 at 1300 m): two channels,
+    # each with straight parallel scan lines across track, one looking
+    # forward and one backward (crossed scan lines), several overlapping
+    # flight lines along the street flown in alternate directions.
     "aerial": {
         "altitude": 1300.0,  # m above the road at x = 0
         "speed": 72.0,  # m/s
-        "density": 8.0,  # pulses per m2 at nadir, each flight line
+        "density": 8.0,  # pulses per m2 at nadir, each flight line (all channels)
         "field_of_view": 58.0,  # full scan angle, deg
         # y of the flight lines, m: the street seen from 0 to 23 degrees off
         # nadir, from both sides
         "line_offsets": (-550.0, -250.0, 0.0, 250.0, 550.0),
-        "tilt": 0.0,  # forward look of the scan plane, deg
+        # forward look of each channel's scan plane, deg: a dual-channel
+        # scanner's crossed scan lines see vertical objects from the front
+        # and the back as well as from the side
+        "channel_tilts": (8.0, -8.0),
         "min_range": 10.0,
         "max_range": 3000.0,
         "range_noise": 0.02,
@@ -201,7 +206,11 @@ def _mobile(conf, street):
 
 
 def _aerial(conf, street):
-    spacing = 1.0 / math.sqrt(float(conf["density"]))
+    tilts = np.deg2rad(np.atleast_1d(np.asarray(conf["channel_tilts"], dtype=float)))
+    if not (len(tilts) and (np.abs(tilts) < np.deg2rad(45.0)).all()):
+        raise ValueError("channel_tilts must be 1 or more angles within +-45 deg")
+    # the pulses are shared between the channels, each with square spacing
+    spacing = 1.0 / math.sqrt(float(conf["density"]) / len(tilts))
     speed, alt = float(conf["speed"]), float(conf["altitude"])
     line_rate = speed / spacing
     step = spacing / alt
@@ -210,7 +219,8 @@ def _aerial(conf, street):
     top = street.top + 5.0
     rows, traj, tables, first, n_ft = [], [], [], 0, 0
     offsets = np.atleast_1d(np.asarray(conf["line_offsets"], dtype=float))
-    for p, y_line in enumerate(offsets):
+    passes = [(p, y, tilt) for p, y in enumerate(offsets) for tilt in tilts]
+    for p, y_line, tilt in passes:
         heading = 1.0 if p % 2 == 0 else -1.0
         # scan angles whose rays can reach the street: its ground, and the
         # tops of its tallest objects seen from the line
@@ -220,10 +230,18 @@ def _aerial(conf, street):
         if hi <= lo:
             continue
         n_per = math.ceil((hi - lo) / step) + 1
-        tilt_shift = alt * math.tan(np.deg2rad(conf["tilt"]))
-        xs = (x0 if heading > 0 else x1) - heading * tilt_shift
-        n_lines = math.ceil((x1 - x0) / (speed / line_rate)) + 1
-        rows.append([y_line, heading, xs, n_ft, step, n_per, n_lines, first, 0.0])
+        # a tilted plane reaches the ground alt tan(tilt) / cos(beta) ahead of
+        # the aircraft (behind for a negative tilt): the lines start and end
+        # so that every scan angle covers the street, tops included (5 m)
+        ahead = [
+            heading * (alt - z) * math.tan(tilt) / math.cos(b)
+            for b in (lo, hi, min(max(0.0, lo), hi))
+            for z in (0.0, top)
+        ]
+        a_lo, a_hi = min(ahead) - 1.0, max(ahead) + 1.0
+        xs = x0 - a_hi if heading > 0 else x1 - a_lo
+        n_lines = math.ceil((x1 - x0 + a_hi - a_lo) / (speed / line_rate)) + 1
+        rows.append([y_line, heading, xs, n_ft, tilt, n_per, n_lines, first, 600.0 * p])
         beta = lo + step * np.arange(n_per)
         tables.append(np.column_stack([np.sin(beta), np.cos(beta)]).ravel())
         n_ft += n_per
@@ -240,10 +258,10 @@ def _aerial(conf, street):
         first += n_per * n_lines
     if not rows:
         raise ValueError("no flight line sees the street: check line_offsets")
-    for i, row in enumerate(rows):  # flight lines one after the other, 10 min apart
-        row[8] = 600.0 * i
+    # flight lines one after the other, 10 min apart; the channels of a line
+    # fly together
     fa = np.asarray(rows, dtype=float).ravel()
-    fp = np.array([alt, speed, line_rate, np.deg2rad(conf["tilt"]), len(rows)])
+    fp = np.array([alt, speed, line_rate, 0.0, len(rows)])
     return AERIAL, fp, fa, np.concatenate(tables), first, np.vstack(traj)
 
 
@@ -287,22 +305,56 @@ def plan_scan(scanner, conf, street):
     }
 
 
-def widen_cylinders(scene, footprint):
-    """The scene with ``footprint`` added to the radius of every cylinder.
+# correlation length of foliage and fence mesh (leaf clumps, twigs, mesh
+# cells), m: a footprint of radius R covers about pi R^2 / GRAIN^2 independent
+# patches of such a surface
+GRAIN = 0.1
 
-    A beam of finite width returns from a pole or a wire as soon as its
-    footprint touches it, at the range of the pole: the pole looks wider by
-    the footprint's radius. Returns the scene itself for ``footprint=0``.
+
+def apply_footprint(scene, footprint, porous=None):
+    """The scene as a beam of footprint radius ``footprint`` sees it.
+
+    - Cylinders get ``footprint`` added to their radius: a beam of finite
+      width returns from a pole or a wire as soon as its footprint touches
+      it, at the range of the pole, so the pole looks wider by the
+      footprint's radius.
+    - Boxes thinner than the footprint across a near-horizontal axis (fence
+      panels and mesh, sign plates, railing bars) get it added across that
+      axis, for the same reason.
+    - ``porous`` primitives (foliage, mesh: a mask) of hit probability p for
+      a thin ray return an echo from a wide footprint with probability
+      ``1 - (1 - p) ** n``, ``n = pi footprint**2 / GRAIN**2`` patches: a
+      footprint of 0.15 m covers seven leaf clumps or mesh cells, and meets
+      at least one with probability 0.95 for p = 0.35. The beam goes on
+      behind them for later echoes, as before.
+
+    Returns the scene itself for ``footprint=0``.
     """
     if not footprint > 0:
         return scene
     out = dict(scene)
-    cyl = scene["kind"] == CYLINDER
-    out["params"] = scene["params"].copy()
-    out["params"][cyl, 6:8] += footprint
-    out["aabb"] = scene["aabb"].copy()
-    out["aabb"][cyl, :3] -= footprint
-    out["aabb"][cyl, 3:] += footprint
+    kind = scene["kind"]
+    params = out["params"] = scene["params"].copy()
+    aabb = out["aabb"] = scene["aabb"].copy()
+    cyl = kind == CYLINDER
+    params[cyl, 6:8] += footprint
+    aabb[cyl, :3] -= footprint
+    aabb[cyl, 3:] += footprint
+    box = np.flatnonzero(kind == BOX)
+    half = params[box, 3:6]
+    rot = params[box, 6:15].reshape(-1, 3, 3)  # rot[:, j, i]: world j of axis i
+    thin = (half < footprint) & (np.abs(rot[:, 2, :]) < 0.5)
+    grow = np.where(thin, footprint, 0.0)
+    params[box, 3:6] += grow
+    ext = np.einsum("bji,bi->bj", np.abs(rot), grow)
+    aabb[box, :3] -= ext
+    aabb[box, 3:] += ext
+    if porous is not None and np.any(porous):
+        n = np.pi * footprint**2 / GRAIN**2
+        hit = out["hit"] = scene["hit"].copy()
+        p = np.clip(hit[porous], 0.0, 1.0)
+        # stays below 1, so that the beam goes on behind for later echoes
+        hit[porous] = np.minimum(1.0 - (1.0 - p) ** max(n, 1.0), 0.999)
     return out
 
 

@@ -21,11 +21,11 @@ from skpcd.datasets._street._layout import (
 )
 from skpcd.datasets._street._scanners import (
     SCAN_PATTERNS,
+    apply_footprint,
     build_grid,
     plan_scan,
     resolve_pattern,
     scan,
-    widen_cylinders,
 )
 
 __all__ = [
@@ -51,9 +51,23 @@ def _seeds(random_state):
     return np.random.RandomState(layout), int(scan_seed)
 
 
+_FENCE = STREET_CLASSES.index("fence")
+
+
+def _porous(scene):
+    """Primitives a wide beam sees as porous: foliage clusters (every
+    ellipsoid a ray may cross, in trees, bushes and planters) and fence
+    mesh, not glass."""
+    from skpcd.datasets._street._raycast import ELLIPSOID
+
+    return (scene["hit"] < 1.0) & (
+        (scene["kind"] == ELLIPSOID) | (scene["class_id"] == _FENCE)
+    )
+
+
 def _simulate(street, scene, scanner, conf, seed, drop, n_jobs, interest=None):
     plan = plan_scan(scanner, conf, street)
-    scene = widen_cylinders(scene, float(conf["footprint"]))
+    scene = apply_footprint(scene, float(conf["footprint"]), _porous(scene))
     grid = build_grid(scene)
     out = scan(
         plan, conf, scene, grid, seed, drop=drop, interest=interest, n_jobs=n_jobs
@@ -120,10 +134,13 @@ def make_street_scene(
           (720 000 pulses per second and scanner), a 40 degree cone below
           the scanners hidden by the vehicle, 1-100 m range, 8 mm noise.
         - ``"aerial"``: parallel scan lines across track from 1300 m at
-          72 m/s, five flight lines along the street (y = 0, +-250 and
-          +-550 m) flown in alternate directions, 8 pulses per m2 each at
-          nadir (DALES-like: about 40 per m2 in total), up to 4 echoes per
-          pulse, 2 cm noise, a 0.15 m beam footprint added to cylinders.
+          72 m/s, by two channels looking 8 degrees forward and backward
+          (crossed scan lines), five flight lines along the street (y = 0,
+          +-250 and +-550 m) flown in alternate directions, 8 pulses per m2
+          each at nadir (DALES-like: about 40 per m2 in total), up to 4
+          echoes per pulse, 2 cm noise, a beam footprint of 0.15 m radius
+          (cylinders and thin panels look that much wider; foliage and mesh
+          return from most pulses that cross them).
         - ``"ugv"``: one sweep of a spinning 32-beam sensor 1.8 m above
           the road in the middle of the street (HDL-32E vertical angles
           -30.67 to +10.67 degrees, 0.16 degree azimuth step), 1-100 m
@@ -198,7 +215,9 @@ def make_street_scene(
     them for further echoes). Wires are given an effective radius of 2 cm,
     because a real beam several centimetres wide returns from wires
     thinner than that; the aerial pattern adds its footprint (0.15 m) to
-    every cylinder for the same reason. What the simulation does not model
+    every cylinder and to thin panels for the same reason, and its
+    footprint, which covers several leaf clumps or mesh cells, returns an
+    echo from foliage or mesh with a higher probability than a thin ray. What the simulation does not model
     (intensity, full waveform, mixed pixels at edges, noise points, moving
     objects, trajectory errors) is listed in the user guide, with a
     comparison against the DALES objects.
