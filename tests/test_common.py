@@ -15,6 +15,7 @@ from skpcd.features import (
     OverallDescriptor,
     PFHTransformer,
     ShapeFeatures,
+    VerticalProfile,
 )
 from skpcd.preprocessing import GridSampler, NormalEstimator
 from skpcd.utils.estimator_checks import ragged_checks
@@ -23,6 +24,8 @@ from skpcd.utils.estimator_checks import ragged_checks
 # sklearn's parametrize_with_checks instead.
 RAGGED = [
     ShapeFeatures(),
+    VerticalProfile(),
+    VerticalProfile(n_slices=3),
     NormalEstimator(n_neighbors=8),
     PFHTransformer(n_neighbors=8),
     FPFHTransformer(n_neighbors=8),
@@ -65,6 +68,8 @@ TWO_D = [
     CaseBasedClassifier(),
     CaseBasedClassifier(threshold=None, w1=0.3),
     TWO_STEP,
+    # groups learned in fit from the inner-CV confusions of the coarse estimator
+    TwoStepClassifier(LogisticRegression(), groups="auto", random_state=0),
 ]
 
 # Every expected failure of sklearn's checks, with its reason.

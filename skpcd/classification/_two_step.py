@@ -10,12 +10,14 @@ classifiers and any grouping of the labels.
 
 import typing
 import warnings
-from numbers import Number
+from numbers import Integral, Number, Real
 
 import numpy as np
 from sklearn.base import BaseEstimator, ClassifierMixin, _fit_context, clone
+from sklearn.metrics import confusion_matrix
+from sklearn.model_selection import StratifiedKFold, check_cv, cross_val_predict
 from sklearn.utils import get_tags
-from sklearn.utils._param_validation import HasMethods, StrOptions
+from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 from sklearn.utils.metaestimators import available_if
 from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import (
@@ -113,6 +115,49 @@ def _group_structure(groups, classes):
     return group_names, class_group
 
 
+def _merge_confused(classes, confusion, threshold):
+    """``{label: group}`` merging every class pair confused more than ``threshold``.
+
+    ``confusion[i, j]`` is the fraction of the samples of class ``i``
+    predicted as class ``j``. Classes ``i`` and ``j`` are linked when their
+    symmetric confusion rate ``(confusion[i, j] + confusion[j, i]) / 2``
+    exceeds ``threshold``; the groups are the connected components of these
+    links (union-find, i.e. single-linkage agglomeration). A group of several
+    classes is named by its labels joined with "+", in the order of
+    ``classes``; a class alone keeps no entry (it is its own group).
+    """
+    n = len(classes)
+    parent = list(range(n))
+
+    def root(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    rate = (confusion + confusion.T) / 2
+    for i in range(n):
+        for j in range(i + 1, n):
+            if rate[i, j] > threshold:
+                a, b = root(i), root(j)
+                if a != b:
+                    parent[max(a, b)] = min(a, b)
+    members = {}
+    for i in range(n):
+        members.setdefault(root(i), []).append(i)
+    names = classes.tolist()
+    taken = {str(c) for c in names}
+    mapping = {}
+    for rows in members.values():
+        if len(rows) < 2:
+            continue
+        name = "+".join(str(names[i]) for i in rows)
+        while name in taken:  # a class already bears that name
+            name += "'"
+        mapping.update({names[i]: name for i in rows})
+    return mapping
+
+
 def _has_proba(estimator):
     return hasattr(estimator, "predict_proba")
 
@@ -150,8 +195,10 @@ class TwoStepClassifier(ClassifierMixin, BaseEstimator):
     fine_estimator : classifier, default=None
         Template of the within-group classifiers, cloned once per group with
         more than one class. None means a clone of ``coarse_estimator``.
-    groups : dict or None, default=None
-        The grouping of the fine labels, in either of two forms:
+    groups : dict, "auto" or None, default=None
+        The grouping of the fine labels: "auto" to learn it in :meth:`fit`
+        from the confusions of a one-step classifier (see
+        ``group_threshold``), or a dict in either of two forms:
 
         - ``{label: group}``, e.g. ``{"lamp post": "pole", "street light":
           "pole", "traffic sign": "pole"}``;
@@ -180,6 +227,27 @@ class TwoStepClassifier(ClassifierMixin, BaseEstimator):
         The two can differ: with p(group) = (0.6, 0.4) for groups {a, b} and
         {c}, and p(a | {a, b}) = 0.55, the cascade says a, while the
         probabilities (0.33, 0.27, 0.40) say c.
+    group_threshold : float in [0, 1], default=0.1
+        With ``groups="auto"``: classes ``i`` and ``j`` join one group when
+        their symmetric confusion rate, the mean of the fraction of ``i``
+        predicted as ``j`` and the fraction of ``j`` predicted as ``i``,
+        exceeds this; groups are then merged transitively (single linkage).
+        1 keeps every class apart (one step), 0 merges every pair confused
+        at all. A parameter like any other, so a grid search can tune it.
+        Ignored unless ``groups="auto"``.
+    cv : int, cross-validation generator or iterable, default=3
+        With ``groups="auto"``: the cross-validation giving the confusions,
+        out-of-fold predictions of a clone of ``coarse_estimator`` trained on
+        the fine labels. An int is the number of folds of a shuffled
+        :class:`~sklearn.model_selection.StratifiedKFold` (fewer if no class
+        has that many samples); other values (a splitter, an iterable of
+        (train, test) index arrays, None for 5 folds) go through
+        :func:`~sklearn.model_selection.check_cv`. Ignored unless
+        ``groups="auto"``.
+    random_state : int, RandomState instance or None, default=None
+        Shuffles the folds of an int ``cv``; an int makes the learned groups
+        reproducible (if the estimators are). Ignored unless
+        ``groups="auto"``.
 
     Attributes
     ----------
@@ -188,12 +256,19 @@ class TwoStepClassifier(ClassifierMixin, BaseEstimator):
         columns of :meth:`predict_proba` follow this order.
     groups_ : ndarray of object of shape (n_groups,)
         The group names, in the order of their first class in ``classes_``.
+        With ``groups="auto"`` a learned group of several classes is named by
+        its labels joined with "+" (``"lamp+sign"``), a class alone by its
+        label.
         The coarse estimator predicts indices into this array:
         ``groups_[coarse_estimator_.predict(X)]`` are the predicted groups.
     group_of_ : dict
         The group name of each class in ``classes_``.
     group_classes_ : dict
         For each group name, the ndarray of its classes (sorted).
+    confusion_ : ndarray of shape (n_classes, n_classes)
+        Only with ``groups="auto"``: the cross-validated confusions the groups
+        were learned from; row ``i`` holds the fractions of class
+        ``classes_[i]`` predicted as each class (rows sum to 1).
     coarse_estimator_ : classifier or None
         The fitted clone of ``coarse_estimator``, trained on group indices;
         None when all classes of ``y`` are in one group (step one has
@@ -229,6 +304,15 @@ class TwoStepClassifier(ClassifierMixin, BaseEstimator):
     input, NaN if both allow it). To classify lists of clouds, put the
     descriptor steps before this classifier in a pipeline.
 
+    ``groups="auto"`` replaces the paper's hand-made grouping by the one its
+    argument suggests: classes that a one-step classifier confuses go
+    together. It costs ``cv`` extra fits of ``coarse_estimator`` on the fine
+    labels. Rare classes weigh as much as abundant ones in the rates (they
+    are fractions of each class), so a rare class mostly taken for another
+    joins it. Learning the groups does not guarantee a better classifier:
+    when the confused classes stay confused within their group, the two
+    steps only redistribute the errors (see the User Guide).
+
     References
     ----------
     .. [1] H. He, K. Khoshelham, C. Fraser, "A two-step classification
@@ -256,22 +340,50 @@ class TwoStepClassifier(ClassifierMixin, BaseEstimator):
     array(['lamp', 'sign', 'tree'], dtype='<U4')
     >>> bool(np.allclose(clf.predict_proba(X).sum(axis=1), 1))
     True
+
+    Groups learned from the confusions of the coarse estimator: "lamp" and
+    "sign" overlap, "tree" stands apart.
+
+    >>> rng = np.random.default_rng(0)
+    >>> X = np.vstack([rng.normal(m, 1, (30, 2)) for m in (0, 0.3, 8)])
+    >>> y = np.repeat(["lamp", "sign", "tree"], 30)
+    >>> clf = TwoStepClassifier(
+    ...     LogisticRegression(), groups="auto", group_threshold=0.2, random_state=0
+    ... ).fit(X, y)
+    >>> clf.groups_
+    array(['lamp+sign', 'tree'], dtype=object)
+    >>> clf.confusion_.round(1)[2]
+    array([0., 0., 1.])
     """
 
     _parameter_constraints: typing.ClassVar[dict] = {
         "coarse_estimator": [HasMethods(["fit", "predict"])],
         "fine_estimator": [HasMethods(["fit", "predict"]), None],
-        "groups": [dict, None],
+        "groups": [dict, StrOptions({"auto"}), None],
         "method": [StrOptions({"cascade", "proba"})],
+        "group_threshold": [Interval(Real, 0, 1, closed="both")],
+        "cv": ["cv_object"],
+        "random_state": ["random_state"],
     }
 
     def __init__(
-        self, coarse_estimator, fine_estimator=None, *, groups=None, method="cascade"
+        self,
+        coarse_estimator,
+        fine_estimator=None,
+        *,
+        groups=None,
+        method="cascade",
+        group_threshold=0.1,
+        cv=3,
+        random_state=None,
     ):
         self.coarse_estimator = coarse_estimator
         self.fine_estimator = fine_estimator
         self.groups = groups
         self.method = method
+        self.group_threshold = group_threshold
+        self.cv = cv
+        self.random_state = random_state
 
     def _fine_template(self):
         if self.fine_estimator is None:
@@ -327,12 +439,15 @@ class TwoStepClassifier(ClassifierMixin, BaseEstimator):
                     )
 
         self.classes_, y_index = np.unique(y, return_inverse=True)
-        self.groups_, self._class_group = _group_structure(self.groups, self.classes_)
         if len(self.classes_) < 2:
             raise ValueError(
                 f"y contains 1 class ({self.classes_[0]!r}); a classifier needs "
                 "samples of at least 2 classes"
             )
+        groups = self.groups
+        if isinstance(groups, str):  # "auto"
+            groups = self._learn_groups(X, y, y_index, sample_weight)
+        self.groups_, self._class_group = _group_structure(groups, self.classes_)
         self.group_of_ = {
             c: self.groups_[g] for c, g in zip(self.classes_, self._class_group)
         }
@@ -359,6 +474,38 @@ class TwoStepClassifier(ClassifierMixin, BaseEstimator):
                 X[rows], y[rows], **weight
             )
         return self
+
+    def _learn_groups(self, X, y, y_index, sample_weight):
+        """Groups from the confusions of a cross-validated one-step classifier."""
+        counts = np.bincount(y_index)
+        if isinstance(self.cv, Integral):
+            n_splits = min(self.cv, int(counts.max()))
+            cv = None
+            if n_splits >= 2:
+                cv = StratifiedKFold(
+                    n_splits, shuffle=True, random_state=self.random_state
+                )
+        else:
+            cv = check_cv(self.cv, y, classifier=True)
+        if cv is None:
+            warnings.warn(
+                "groups='auto': every class has a single sample, too few for a "
+                "cross-validation; every class is its own group",
+                UserWarning,
+                stacklevel=3,
+            )
+            self.confusion_ = np.eye(len(self.classes_))
+            return {}
+        params = {} if sample_weight is None else {"sample_weight": sample_weight}
+        with warnings.catch_warnings():
+            # a class rarer than the folds: its samples are predicted anyway
+            warnings.filterwarnings("ignore", "The least populated class")
+            pred = cross_val_predict(
+                clone(self.coarse_estimator), X, y, cv=cv, params=params
+            )
+        confusion = confusion_matrix(y, pred, labels=self.classes_).astype(float)
+        self.confusion_ = confusion / counts[:, None]
+        return _merge_confused(self.classes_, self.confusion_, self.group_threshold)
 
     def _class_index(self, labels):
         return np.searchsorted(self.classes_, labels)

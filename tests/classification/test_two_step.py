@@ -478,3 +478,137 @@ def test_groups_of_unusable_values_raise(groups, message):
     X, y = _oracle_data()
     with pytest.raises(ValueError, match=message):
         _oracle_model().set_params(groups=groups).fit(X, y)
+
+
+# ------------------------------------------------------- groups="auto"
+
+
+def _confused_blobs(seed=0, n=30):
+    """Classes 0 and 1 drawn from one blob (confused); 2 and 3 far apart."""
+    rng = np.random.default_rng(seed)
+    centers = [(0.0, 0.0), (0.0, 0.0), (10.0, 0.0), (0.0, 10.0)]
+    X = np.vstack([rng.normal(c, 1.0, (n, 2)) for c in centers])
+    return X, np.repeat(np.arange(4), n)
+
+
+def test_merge_confused_links_pairs_above_the_threshold_transitively():
+    from skpcd.classification._two_step import _merge_confused
+
+    classes = np.array(["a", "b", "c", "d"])
+    confusion = np.array(
+        [
+            [0.7, 0.3, 0.0, 0.0],  # a <-> b: (0.3 + 0.1) / 2 = 0.2
+            [0.1, 0.8, 0.1, 0.0],  # b <-> c: (0.1 + 0.3) / 2 = 0.2
+            [0.0, 0.3, 0.6, 0.1],  # c <-> d: (0.1 + 0.1) / 2 = 0.1
+            [0.0, 0.0, 0.1, 0.9],
+        ]
+    )
+    # 0.2 > 0.15 links a-b and b-c: one group {a, b, c} by transitivity
+    assert _merge_confused(classes, confusion, 0.15) == dict.fromkeys("abc", "a+b+c")
+    # the rate must exceed the threshold, not equal it
+    assert _merge_confused(classes, confusion, 0.2) == {}
+    assert _merge_confused(classes, confusion, 0.05) == dict.fromkeys("abcd", "a+b+c+d")
+    # a group name never equals a class label
+    named = np.array(["a", "a+b", "b"])
+    rates = np.array([[0.5, 0.0, 0.5], [0.0, 1.0, 0.0], [0.5, 0.0, 0.5]])
+    assert _merge_confused(named, rates, 0.1) == {"a": "a+b'", "b": "a+b'"}
+
+
+def test_auto_groups_merge_the_confused_classes():
+    X, y = _confused_blobs()
+    clf = TwoStepClassifier(
+        LogisticRegression(), groups="auto", group_threshold=0.2, random_state=0
+    ).fit(X, y)
+    assert clf.groups_.tolist() == ["0+1", 2, 3]
+    assert clf.group_classes_["0+1"].tolist() == [0, 1]
+    assert list(clf.fine_estimators_) == ["0+1"]
+    np.testing.assert_allclose(clf.confusion_.sum(axis=1), 1.0)
+    assert clf.confusion_[0, 1] > 0.2 and clf.confusion_[1, 0] > 0.2
+    assert clf.confusion_[2, 2] == 1.0 and clf.confusion_[3, 3] == 1.0
+    # the separable classes are still predicted by step one
+    assert clf.score(X[y >= 2], y[y >= 2]) == 1.0
+
+
+def test_auto_groups_threshold_one_keeps_all_classes_apart():
+    X, y = _confused_blobs()
+    clf = TwoStepClassifier(
+        LogisticRegression(), groups="auto", group_threshold=1.0, random_state=0
+    ).fit(X, y)
+    assert clf.groups_.tolist() == [0, 1, 2, 3]
+    assert clf.fine_estimators_ == {}
+    one_step = LogisticRegression().fit(X, y)
+    np.testing.assert_array_equal(clf.predict(X), one_step.predict(X))
+
+
+def test_auto_groups_are_deterministic_with_random_state():
+    X, y = _confused_blobs(seed=1)
+    make = lambda seed: TwoStepClassifier(  # noqa: E731
+        DecisionTreeClassifier(random_state=0),
+        groups="auto",
+        group_threshold=0.05,
+        random_state=seed,
+    )
+    a, b = make(3).fit(X, y), make(3).fit(X, y)
+    np.testing.assert_array_equal(a.confusion_, b.confusion_)
+    assert a.groups_.tolist() == b.groups_.tolist()
+    np.testing.assert_array_equal(a.predict(X), b.predict(X))
+    # other folds give other confusions (shuffled StratifiedKFold)
+    assert not np.array_equal(a.confusion_, make(4).fit(X, y).confusion_)
+
+
+def test_auto_groups_use_the_given_cv_splits():
+    X, y = _confused_blobs()
+    cv = list(StratifiedKFold(4).split(X, y))
+    clf = TwoStepClassifier(LogisticRegression(), groups="auto", cv=cv).fit(X, y)
+    from sklearn.model_selection import cross_val_predict
+
+    pred = cross_val_predict(LogisticRegression(), X, y, cv=cv)
+    expected = np.array(
+        [[np.mean(pred[y == i] == j) for j in range(4)] for i in range(4)]
+    )
+    np.testing.assert_allclose(clf.confusion_, expected)
+
+
+def test_auto_groups_with_one_sample_per_class_warn():
+    X = np.array([[0.0, 0.0], [1.0, 1.0], [5.0, 5.0]])
+    with pytest.warns(UserWarning, match="single sample"):
+        clf = TwoStepClassifier(KNeighborsClassifier(1), groups="auto").fit(
+            X, ["a", "b", "c"]
+        )
+    assert clf.groups_.tolist() == ["a", "b", "c"]
+
+
+def test_grid_search_tunes_the_group_threshold():
+    from sklearn.model_selection import cross_val_score
+
+    X, y = _confused_blobs()
+    cv = StratifiedKFold(2, shuffle=True, random_state=0)
+    search = GridSearchCV(
+        TwoStepClassifier(LogisticRegression(), groups="auto", random_state=0),
+        {"group_threshold": [0.2, 1.0]},
+        cv=cv,
+    ).fit(X, y)
+    assert (
+        search.best_estimator_.group_threshold == search.best_params_["group_threshold"]
+    )
+    # threshold 1 is the one-step classifier, fold for fold
+    one_step = cross_val_score(LogisticRegression(), X, y, cv=cv).mean()
+    assert search.cv_results_["mean_test_score"][1] == pytest.approx(one_step)
+
+
+def test_auto_groups_survive_save_and_load(tmp_path):
+    from skpcd.io import load_model, save_model
+
+    X, y = _confused_blobs()
+    clf = TwoStepClassifier(
+        LogisticRegression(),
+        DecisionTreeClassifier(random_state=0),
+        groups="auto",
+        group_threshold=0.2,
+        random_state=0,
+    ).fit(X, y)
+    save_model(clf, tmp_path / "two_step.skops")
+    loaded = load_model(tmp_path / "two_step.skops")
+    assert loaded.groups_.tolist() == clf.groups_.tolist()
+    np.testing.assert_array_equal(loaded.confusion_, clf.confusion_)
+    np.testing.assert_array_equal(loaded.predict(X), clf.predict(X))
