@@ -19,6 +19,7 @@ _PUBLIC = {
     "PFHTransformer": "skpcd.features",
     "ShapeFeatures": "skpcd.features",
     "TwoStepClassifier": "skpcd.classification",
+    "VerticalProfile": "skpcd.features",
     "check_point_clouds": "skpcd.utils",
     "make_default_pipeline": "skpcd.classification",
     "make_point_clouds": "skpcd.datasets",

@@ -15,6 +15,7 @@ from skpcd.features import (
     OverallDescriptor,
     PFHTransformer,
     ShapeFeatures,
+    VerticalProfile,
 )
 from skpcd.preprocessing import GridSampler, NormalEstimator
 from skpcd.utils.estimator_checks import ragged_checks
@@ -23,6 +24,8 @@ from skpcd.utils.estimator_checks import ragged_checks
 # sklearn's parametrize_with_checks instead.
 RAGGED = [
     ShapeFeatures(),
+    VerticalProfile(),
+    VerticalProfile(n_slices=3),
     NormalEstimator(n_neighbors=8),
     PFHTransformer(n_neighbors=8),
     FPFHTransformer(n_neighbors=8),

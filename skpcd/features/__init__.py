@@ -9,6 +9,7 @@ from skpcd.features._pfh import (
     compute_pfh,
 )
 from skpcd.features._shape import ShapeFeatures, shape_features
+from skpcd.features._vertical import VerticalProfile, vertical_features
 
 __all__ = [
     "FPFHTransformer",
@@ -16,8 +17,10 @@ __all__ = [
     "OverallDescriptor",
     "PFHTransformer",
     "ShapeFeatures",
+    "VerticalProfile",
     "box_dimensions",
     "compute_fpfh",
     "compute_pfh",
     "shape_features",
+    "vertical_features",
 ]

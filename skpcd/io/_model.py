@@ -70,6 +70,7 @@ TRUSTED_TYPES = (
     "skpcd.features._pfh.FPFHTransformer",
     "skpcd.features._pfh.PFHTransformer",
     "skpcd.features._shape.ShapeFeatures",
+    "skpcd.features._vertical.VerticalProfile",
     "skpcd.preprocessing._normals.NormalEstimator",
     "skpcd.preprocessing._outliers.RadiusOutlierFilter",
     "skpcd.preprocessing._outliers.StatisticalOutlierFilter",
