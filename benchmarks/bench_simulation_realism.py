@@ -1,8 +1,9 @@
 """How real do simulated scans look? Simulated aerial objects against DALES.
 
 1. Aerial: streets of :func:`~skpcd.datasets.make_street_scene` scanned with
-   the ``"aerial"`` pattern (its defaults: four flight lines at 1300 m, about
-   40 pulses per m2), cut by true instance into the five DALES classes
+   the ``"aerial"`` pattern (its defaults: five flight lines at 1300 m, two
+   channels looking 8 degrees forward and backward, about 40 pulses per m2),
+   cut by true instance into the five DALES classes
    (facade -> building; pole, street_light, lamp_post and traffic_light ->
    pole, as DALES's poles are utility and light poles; car; fence; tree;
    the other classes are left out), objects
@@ -10,7 +11,8 @@
    objects (``load_dales_objects``) on point count, height (z extent) and
    point spacing (:func:`skpcd.preprocessing.point_spacing`, the median
    distance to the nearest neighbour), each as the 10th, 50th and 90th
-   percentile per class; for poles, the fraction of the circumference seen
+   percentile per class, and the points per metre of height (which takes
+   the height out of the point count); for poles, the fraction of the circumference seen
    (twelve 30-degree sectors around an axis fitted to the points of the
    shaft, 20 to 60 % of the height; the same estimator for both).
 2. Mobile: bare poles of simulated streets (``"mobile"`` pattern, its
@@ -92,6 +94,9 @@ def _stats(clouds):
         "objects": len(clouds),
         "points": np.percentile(n, [10, 50, 90]).tolist(),
         "height": np.percentile(h, [10, 50, 90]).tolist(),
+        "points_per_metre": np.percentile(
+            n / np.maximum(h, 0.1), [10, 50, 90]
+        ).tolist(),
         "spacing": np.nanpercentile(s, [10, 50, 90]).tolist(),
     }
 
@@ -232,12 +237,13 @@ def main(argv=None):
         "Simulated aerial objects against the DALES objects (real aerial LiDAR)",
         f"simulated: {a.streets} streets of {a.length:g} m, make_street_scene("
         f"scanner='aerial'), {len(aer['line_offsets'])} flight lines at "
-        f"{aer['altitude']:g} m, {aer['density']:g} pulses/m2 each; objects of "
+        f"{aer['altitude']:g} m, {aer['density']:g} pulses/m2 each, channels tilted "
+        f"{'/'.join(f'{t:g}' for t in aer['channel_tilts'])} deg; objects of "
         f">= {a.min_points} returns, cut by true instance",
         "values: 10th/50th/90th percentile",
         "",
         f"{'class':9s} {'source':9s} {'objects':>7s} {'points':>16s} "
-        f"{'height m':>16s} {'spacing m':>17s}",
+        f"{'height m':>16s} {'spacing m':>17s} {'points/m height':>16s}",
     ]
     for c in CLASSES:
         for src in ("dales", "simulated"):
@@ -246,7 +252,8 @@ def main(argv=None):
                 continue
             text.append(
                 f"{c:9s} {src:9s} {s['objects']:7d} {fmt(s['points'], 0):>16s} "
-                f"{fmt(s['height'], 1):>16s} {fmt(s['spacing'], 3):>17s}"
+                f"{fmt(s['height'], 1):>16s} {fmt(s['spacing'], 3):>17s} "
+                f"{fmt(s['points_per_metre'], 0):>16s}"
             )
     text += ["", "poles: fraction of the circumference seen (12 sectors of 30 deg)"]
     for k, v in result["pole_circumference"].items():
