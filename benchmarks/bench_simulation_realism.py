@@ -2,7 +2,7 @@
 
 1. Aerial: streets of :func:`~skpcd.datasets.make_street_scene` scanned with
    the ``"aerial"`` pattern (its defaults: five flight lines at 1300 m, two
-   channels looking 8 degrees forward and backward, about 40 pulses per m2),
+   channels looking 14 degrees forward and backward, about 40 pulses per m2),
    cut by true instance into the five DALES classes
    (facade -> building; pole, street_light, lamp_post and traffic_light ->
    pole, as DALES's poles are utility and light poles; car; fence; tree;

@@ -192,7 +192,12 @@ def add_parsers(sub):
     )
     ev.add_argument("--folds", type=int, default=5, help="number of folds (default 5)")
     ev.add_argument("--repeats", type=int, default=1, help="CV repetitions (default 1)")
-    ev.add_argument("--random-state", type=int, default=0, help="seed (default 0)")
+    ev.add_argument(
+        "--random-state",
+        type=int,
+        default=0,
+        help="seed of the folds, the forest and the simulated objects (default 0)",
+    )
     add_n_jobs(ev)
     add_skip_unreadable(ev)
     ev.add_argument("--quiet", action="store_true", help="no progress bars")

@@ -66,8 +66,9 @@ SCAN_PATTERNS = {
         "line_offsets": (-550.0, -250.0, 0.0, 250.0, 550.0),
         # forward look of each channel's scan plane, deg: a dual-channel
         # scanner's crossed scan lines see vertical objects from the front
-        # and the back as well as from the side
-        "channel_tilts": (8.0, -8.0),
+        # and the back as well as from the side (HELIOS++ models the two
+        # channels of the VQ-1560i, the Q1560's successor, at +-14 deg)
+        "channel_tilts": (14.0, -14.0),
         "min_range": 10.0,
         "max_range": 3000.0,
         "range_noise": 0.02,

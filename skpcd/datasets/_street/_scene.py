@@ -134,7 +134,7 @@ def make_street_scene(
           (720 000 pulses per second and scanner), a 40 degree cone below
           the scanners hidden by the vehicle, 1-100 m range, 8 mm noise.
         - ``"aerial"``: parallel scan lines across track from 1300 m at
-          72 m/s, by two channels looking 8 degrees forward and backward
+          72 m/s, by two channels looking 14 degrees forward and backward
           (crossed scan lines), five flight lines along the street (y = 0,
           +-250 and +-550 m) flown in alternate directions, 8 pulses per m2
           each at nadir (DALES-like: about 40 per m2 in total), up to 4
@@ -217,10 +217,10 @@ def make_street_scene(
     thinner than that; the aerial pattern adds its footprint (0.15 m) to
     every cylinder and to thin panels for the same reason, and its
     footprint, which covers several leaf clumps or mesh cells, returns an
-    echo from foliage or mesh with a higher probability than a thin ray. What the simulation does not model
-    (intensity, full waveform, mixed pixels at edges, noise points, moving
-    objects, trajectory errors) is listed in the user guide, with a
-    comparison against the DALES objects.
+    echo from foliage or mesh with a higher probability than a thin ray.
+    What the simulation does not model (intensity, full waveform, mixed
+    pixels at edges, noise points, moving objects, trajectory errors) is
+    listed in the user guide, with a comparison against the DALES objects.
 
     Examples
     --------
