@@ -17,6 +17,7 @@ _PUBLIC = {
     "GroundFilter": "skpcd.segmentation",
     "ImprovedPFHTransformer": "skpcd.features",
     "PFHTransformer": "skpcd.features",
+    "RejectUnknown": "skpcd.classification",
     "ShapeFeatures": "skpcd.features",
     "TwoStepClassifier": "skpcd.classification",
     "VerticalProfile": "skpcd.features",

@@ -6,7 +6,7 @@ from sklearn.tree import DecisionTreeClassifier
 from sklearn.utils import estimator_checks as sk
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
-from skpcd.classification import CaseBasedClassifier, TwoStepClassifier
+from skpcd.classification import CaseBasedClassifier, RejectUnknown, TwoStepClassifier
 from skpcd.datasets import make_point_clouds, make_urban_objects
 from skpcd.encoding import BagOfFeatures
 from skpcd.features import (
@@ -70,6 +70,7 @@ TWO_D = [
     TWO_STEP,
     # groups learned in fit from the inner-CV confusions of the coarse estimator
     TwoStepClassifier(LogisticRegression(), groups="auto", random_state=0),
+    RejectUnknown(LogisticRegression()),
 ]
 
 # Every expected failure of sklearn's checks, with its reason.
@@ -86,6 +87,12 @@ EXPECTED_FAILED_CHECKS = {
     # about label 2) and a single group without step one (y in {1, 2}). All
     # checks pass, as they do with groups=None.
     "TwoStepClassifier": {},
+    "RejectUnknown": {
+        "check_classifiers_train": (
+            "predict answers -1 (unknown) where the best probability is below "
+            "0.5, so it is not always the argmax of predict_proba"
+        ),
+    },
 }
 
 

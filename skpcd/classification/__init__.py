@@ -11,11 +11,13 @@ from skpcd.classification._default import (
     make_default_pipeline,
     make_named_pipeline,
 )
+from skpcd.classification._reject import RejectUnknown
 from skpcd.classification._two_step import TwoStepClassifier
 
 __all__ = [
     "PIPELINES",
     "CaseBasedClassifier",
+    "RejectUnknown",
     "TwoStepClassifier",
     "case_similarity",
     "make_case_based_pipeline",

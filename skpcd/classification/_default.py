@@ -3,30 +3,37 @@
 from sklearn.ensemble import RandomForestClassifier
 from sklearn.pipeline import FeatureUnion, make_pipeline
 
-from skpcd.features import PFHTransformer, ShapeFeatures
+from skpcd.classification._reject import RejectUnknown
+from skpcd.features import ShapeFeatures, VerticalProfile
 
 __all__ = ["PIPELINES", "make_default_pipeline", "make_named_pipeline"]
 
 
-def make_default_pipeline(*, random_state=0, n_jobs=None):
+def make_default_pipeline(*, unknown_threshold=None, random_state=0, n_jobs=None):
     """Build the default segment-identification pipeline.
 
-    Global shape features of each segment (:class:`~skpcd.features.ShapeFeatures`)
-    beside its PFH averaged over its points
-    (:class:`~skpcd.features.PFHTransformer` with ``n_neighbors=10`` and
-    ``pooling="mean"``), followed by a random forest of 300 trees. It takes
-    a list of clouds and predicts one label per cloud; it composes with
-    :func:`~sklearn.model_selection.cross_val_score` and
-    :class:`~sklearn.model_selection.GridSearchCV` like any scikit-learn
-    pipeline (``randomforestclassifier__max_features``,
-    ``featureunion__pfh__n_neighbors``...).
+    Global shape features of each segment
+    (:class:`~skpcd.features.ShapeFeatures`) beside descriptors of its
+    vertical structure (:class:`~skpcd.features.VerticalProfile`: height
+    slices, the pole, what the pole carries), followed by a random forest
+    of 300 trees. It takes a list of clouds and predicts one label per
+    cloud; it composes with :func:`~sklearn.model_selection.cross_val_score`
+    and :class:`~sklearn.model_selection.GridSearchCV` like any
+    scikit-learn pipeline (``randomforestclassifier__max_features``,
+    ``featureunion__vertical__n_slices``...).
 
     Parameters
     ----------
+    unknown_threshold : float or None, default=None
+        None: always answer a trained class. A probability in [0, 1]: the
+        forest is wrapped in :class:`~skpcd.classification.RejectUnknown`,
+        which answers ``"unknown"`` (``-1`` for numeric labels) where the
+        best class probability is below it (then the forest's parameters
+        are ``rejectunknown__estimator__...``).
     random_state : int, RandomState instance or None, default=0
         Seeds the forest.
     n_jobs : int, default=None
-        Threads for the PFH and the forest; None means 1, -1 all cores.
+        Threads for the forest; None means 1, -1 all cores.
 
     Returns
     -------
@@ -35,17 +42,12 @@ def make_default_pipeline(*, random_state=0, n_jobs=None):
 
     Notes
     -----
-    Chosen by cross-validation on the 399 DALES objects (5 folds x 3,
-    ``benchmarks/bench_identification.py``) among 27 pipelines built from
-    skpcd's pieces: 99.1 +/- 1.3 % accuracy, against 97.5 +/- 1.2 % for the
-    shape features alone with the same forest; a nested cross-validation
-    that picks the pipeline inside each training fold also scores 99.1 %.
-    The PFH alone scores far lower (93 % at best): on aerial objects size,
-    height and verticality carry most of the information, and the averaged
-    PFH adds the local surface shape (it mostly separates trees from poles
-    and buildings). Points whose PFH is undefined are left out of the mean;
-    a segment without any defined PFH gets NaN columns, which the forest
-    accepts. See :ref:`identification`.
+    Chosen by cross-validation over the 399 aerial DALES objects and
+    simulated street objects (:func:`~skpcd.datasets.make_street_objects`,
+    mobile and UGV scans, and rare-class subsamples of them) in
+    ``benchmarks/bench_street_identification.py``; the numbers are in
+    ``benchmarks/results/street_identification.txt`` and
+    :ref:`identification`.
 
     Examples
     --------
@@ -55,23 +57,23 @@ def make_default_pipeline(*, random_state=0, n_jobs=None):
     >>> model = make_default_pipeline().fit(clouds[:40], labels[:40])
     >>> model.predict(clouds[40:]).shape
     (10,)
+    >>> make_default_pipeline(unknown_threshold=0.5).steps[-1][0]
+    'rejectunknown'
     """
+    forest = RandomForestClassifier(
+        n_estimators=300, random_state=random_state, n_jobs=n_jobs
+    )
+    if unknown_threshold is not None:
+        forest = RejectUnknown(forest, threshold=unknown_threshold)
     return make_pipeline(
-        FeatureUnion(
-            [
-                ("shape", ShapeFeatures()),
-                ("pfh", PFHTransformer(n_neighbors=10, pooling="mean", n_jobs=n_jobs)),
-            ]
-        ),
-        RandomForestClassifier(
-            n_estimators=300, random_state=random_state, n_jobs=n_jobs
-        ),
+        FeatureUnion([("shape", ShapeFeatures()), ("vertical", VerticalProfile())]),
+        forest,
     )
 
 
 #: The pipelines of ``skpcd evaluate/fit --pipeline NAME``: name -> what it is.
 PIPELINES = {
-    "default": "shape features + mean PFH (k=10) -> random forest (300 trees)",
+    "default": "shape features + vertical profile -> random forest (300 trees)",
     "case-based": "improved FPFH (k=10) -> CaseBasedClassifier (threshold 0.8)",
 }
 

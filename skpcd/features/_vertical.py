@@ -8,6 +8,7 @@ import numpy as np
 from sklearn.utils._param_validation import Interval
 
 from skpcd.features._overall import _check_size_extents
+from skpcd.features._vertical_kernels import geometric_median
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
 from skpcd.utils._parallel import map_batches
@@ -56,20 +57,15 @@ def _feature_names(n_slices):
     return names
 
 
-def _centre_xy(x, y, max_iter=100):
-    """The geometric median of the points (Weiszfeld's iterations from the
-    mean): robust to clutter, and it turns with the points (a
-    coordinate-wise median would not be invariant to rotations about z)."""
-    cx, cy = float(x.mean()), float(y.mean())
+def _centre_xy(x, y):
+    """The geometric median of the points: robust to clutter, and it turns
+    with the points (a coordinate-wise median would not be invariant to
+    rotations about z)."""
     scale = float(np.ptp(x) + np.ptp(y))
-    for _ in range(max_iter):
-        w = 1.0 / np.maximum(np.hypot(x - cx, y - cy), 1e-12 * (1.0 + scale))
-        nx, ny = float(x @ w) / w.sum(), float(y @ w) / w.sum()
-        step = np.hypot(nx - cx, ny - cy)
-        cx, cy = nx, ny
-        if step <= 1e-12 * (1.0 + scale):
-            break
-    return cx, cy
+    cx, cy = geometric_median(
+        np.ascontiguousarray(x), np.ascontiguousarray(y), 500, 1e-10 * (1.0 + scale)
+    )
+    return float(cx), float(cy)
 
 
 def _eigen_ratios(dx, dy, dz):

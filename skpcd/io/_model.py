@@ -63,6 +63,7 @@ TRUSTED_TYPES = (
     "sklearn.model_selection._split.StratifiedKFold",
     "sklearn.tree._tree.Tree",
     "skpcd.classification._case_based.CaseBasedClassifier",
+    "skpcd.classification._reject.RejectUnknown",
     "skpcd.classification._two_step.TwoStepClassifier",
     "skpcd.encoding._bag.BagOfFeatures",
     "skpcd.features._improved.ImprovedPFHTransformer",
