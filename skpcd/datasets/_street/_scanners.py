@@ -327,7 +327,7 @@ def apply_footprint(scene, footprint, porous=None):
       ``1 - (1 - p) ** n``, ``n = pi footprint**2 / GRAIN**2`` patches: a
       footprint of 0.15 m covers seven leaf clumps or mesh cells, and meets
       at least one with probability 0.95 for p = 0.35. The beam goes on
-      behind them for later echoes, as before.
+      behind them for later echoes.
 
     Returns the scene itself for ``footprint=0``.
     """
