@@ -337,7 +337,7 @@ def _worker_profile(spec, clouds):
         w = time.perf_counter()
         cs = check_point_clouds(clouds)
         w = tick(t, "validate", w)
-        xyz, offsets, nb = pack_neighborhoods(cs, n_jobs=nj, with_sqdist=False, **kw)
+        xyz, offsets, nb = pack_neighborhoods(cs, n_threads=nj, with_sqdist=False, **kw)
         w = tick(t, "pack + neighbour search", w)
         p = xyz.astype(np.float32)
         n, _ = _normals_f32(p, nb, np.zeros(3), nj)
@@ -350,7 +350,7 @@ def _worker_profile(spec, clouds):
         del out
         for algorithm in ("grid", "kd_tree"):
             w = time.perf_counter()
-            search_packed(xyz, offsets, n_jobs=nj, algorithm=algorithm, **kw)
+            search_packed(xyz, offsets, n_threads=nj, algorithm=algorithm, **kw)
             tick(t, f"  search alone, {algorithm}", w)
         all_runs.append(t)
     # each stage's best over the repeats

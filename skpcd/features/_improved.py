@@ -4,13 +4,13 @@ import typing
 from numbers import Integral, Real
 
 import numpy as np
-from sklearn.base import _fit_context
 from sklearn.utils._param_validation import Interval, StrOptions
 
+from skpcd.features._improved_kernels import improved_rows
 from skpcd.preprocessing._normals import _normals_f32, pack_neighborhoods
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
-from skpcd.utils._parallel import map_batches, parallel_rows
+from skpcd.utils._parallel import parallel_rows
 from skpcd.utils._validation import (
     NORMALS_OPTIONS,
     _check_given_normals,
@@ -194,26 +194,10 @@ class ImprovedPFHTransformer(CloudTransformer):
         _check_given_normals(clouds, self.normals, estimation=estimation)
         return clouds
 
-    @_fit_context(prefer_skip_nested_validation=True)
-    def fit(self, X, y=None):
-        """Check the parameters and the clouds; nothing is learned.
-
-        Parameters
-        ----------
-        X : sequence of ndarray of shape (n_points_i, 3+)
-            The segments, xyz first; with ``normals="auto"`` (the default)
-            columns 3-5 of a segment with 6 or more columns are its normals.
-        y : None
-            Ignored.
-
-        Returns
-        -------
-        self : ImprovedPFHTransformer
-            The transformer.
-        """
-        super().fit(X)
+    def _fit_clouds(self, X):
+        clouds = super()._fit_clouds(X)
         self.n_output_features_ = self._width()
-        return self
+        return clouds
 
     def transform(self, X):
         """The improved descriptor of every segment.
@@ -232,13 +216,10 @@ class ImprovedPFHTransformer(CloudTransformer):
             summing to 100 (per block for ``"fpfh"``); undefined segments
             get NaN or zeros (``undefined``).
         """
-        clouds = self._validate(X)
-        return map_batches(self._transform_batch, clouds, self.n_jobs)
+        return super().transform(X)
 
-    def _transform_batch(self, clouds, n_jobs):
+    def _transform_batch(self, clouds, n_threads):
         """:meth:`transform` of validated clouds (one batch of them)."""
-        from skpcd.features._pfh_kernels import improved_rows
-
         given = [_has_normal_columns(c, self.normals) for c in clouds]
         offsets = np.zeros(len(clouds) + 1, dtype=np.int64)
         np.cumsum([len(c) for c in clouds], out=offsets[1:])
@@ -251,12 +232,12 @@ class ImprovedPFHTransformer(CloudTransformer):
             if k is None and self.radius is None:
                 k = 10
             xyz, offsets, nb = pack_neighborhoods(
-                clouds, n_neighbors=k, radius=self.radius, n_jobs=n_jobs,
+                clouds, n_neighbors=k, radius=self.radius, n_threads=n_threads,
                 with_sqdist=False,
             )  # fmt: skip
             # no PCL rounding to keep: every axis relative to the minimum
             p, _ = local_frame(xyz, offsets, keep_within=0)
-            n = _normals_f32(p, nb, np.zeros(3), n_jobs)[0]  # signs unused
+            n = _normals_f32(p, nb, np.zeros(3), n_threads)[0]  # signs unused
             del nb
             for i in np.flatnonzero(given):  # "auto" on a mixed batch
                 n[offsets[i] : offsets[i + 1]] = clouds[i][:, 3:6]
@@ -266,7 +247,7 @@ class ImprovedPFHTransformer(CloudTransformer):
         out = np.zeros((len(clouds), self._width()))
         middle = MIDDLES.index(self.middle)
         args = (offsets, xyz, p, n, middle, n_bins, mode, out)
-        parallel_rows(improved_rows, len(clouds), n_jobs, *args)
+        parallel_rows(improved_rows, len(clouds), n_threads, *args)
         # counts to percentages: per row, or per block of the "fpfh" variant
         blocks = out.reshape(len(out), 1 if mode == 0 else 3, -1)
         total = blocks.sum(axis=2, keepdims=True)

@@ -6,9 +6,7 @@ from numbers import Real
 import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
 
-from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
-from skpcd.utils._parallel import map_batches
 from skpcd.utils._validation import check_extents
 
 # Extents up to this keep every size finite in float64 (a volume is the
@@ -162,11 +160,14 @@ class OverallDescriptor(CloudTransformer):
         descriptor : ndarray of shape (n_segments, 12)
             Columns named by :meth:`get_feature_names_out`.
         """
-        clouds = check_point_clouds(X)
-        _check_size_extents(clouds)
-        return map_batches(self._transform_batch, clouds)
+        return super().transform(X)
 
-    def _transform_batch(self, clouds, n_jobs):
+    def _validate(self, X):
+        clouds = super()._validate(X)
+        _check_size_extents(clouds)
+        return clouds
+
+    def _transform_batch(self, clouds, n_threads):
         """:meth:`transform` of validated clouds (one batch of them)."""
         rows = np.empty((len(clouds), len(OVERALL_NAMES)))
         m = float(self.min_extent)

@@ -9,11 +9,21 @@ kernel over all points of all clouds.
 import itertools
 import typing
 from numbers import Integral, Real
+from queue import SimpleQueue
 
 import numpy as np
-from sklearn.base import BaseEstimator, TransformerMixin, _fit_context
 from sklearn.utils._param_validation import Interval, StrOptions
 
+from skpcd.features._pfh_kernels import (
+    ROW_MIN,
+    fpfh_rows,
+    increment_sums,
+    pfh_rows,
+    pfh_rows_reuse,
+    spfh_rows,
+    spfh_values,
+)
+from skpcd.preprocessing._grid import ball_block, ball_block_normals, radius_grid
 from skpcd.preprocessing._neighbors import Neighborhoods, compute_neighborhoods
 from skpcd.preprocessing._normals import (
     _check_viewpoint,
@@ -21,12 +31,9 @@ from skpcd.preprocessing._normals import (
     pack_neighborhoods,
 )
 from skpcd.utils import check_point_clouds
-from skpcd.utils._parallel import (
-    effective_threads,
-    map_batches,
-    parallel_rows,
-    release_free_memory,
-)
+from skpcd.utils._estimator import CloudTransformer
+from skpcd.utils._memory import release_free_memory, unshared_zeros
+from skpcd.utils._parallel import effective_threads, map_batches, parallel_rows
 from skpcd.utils._validation import (
     NORMALS_OPTIONS,
     _check_given_normals,
@@ -61,11 +68,11 @@ def _as_f32(points, normals, neighborhoods):
     return p, n
 
 
-def _neighborhoods(points, neighborhoods, n_neighbors, radius, n_jobs):
+def _neighborhoods(points, neighborhoods, n_neighbors, radius, n_threads):
     if neighborhoods is not None:
         return neighborhoods
     return compute_neighborhoods(
-        points, n_neighbors=n_neighbors, radius=radius, n_jobs=n_jobs
+        points, n_neighbors=n_neighbors, radius=radius, n_jobs=n_threads
     )
 
 
@@ -113,17 +120,16 @@ def compute_pfh(
         NaN that is not a unit vector, or the cloud spans more than float32
         squared distances can hold (about 1e19).
     """
-    nb = _neighborhoods(points, neighborhoods, n_neighbors, radius, n_jobs)
+    n_threads = effective_threads(n_jobs)
+    nb = _neighborhoods(points, neighborhoods, n_neighbors, radius, n_threads)
     p, n = _as_f32(points, normals, nb)
-    return _pfh_packed(p, n, nb, int(n_bins), n_jobs)
+    return _pfh_packed(p, n, nb, int(n_bins), n_threads)
 
 
-def _pfh_packed(p, n, nb, n_bins, n_jobs, cloud_ptr=None):
+def _pfh_packed(p, n, nb, n_bins, n_threads, cloud_ptr=None):
     """PFH kernel over float32 packed arrays (clouds at ``cloud_ptr``, in
     their local frames)."""
-    from skpcd.features._pfh_kernels import ROW_MIN, pfh_rows
-
-    out = _zeros((len(p), n_bins**3), np.float32)
+    out = unshared_zeros((len(p), n_bins**3), np.float32)
     args = (p, n, nb.indptr, nb.indices, n_bins, out)
     if len(p) and len(nb.indices) >= ROW_MIN * len(p) and n_bins**3 < 2**15:
         # large neighbourhoods: visited in space order, consecutive ones
@@ -134,60 +140,26 @@ def _pfh_packed(p, n, nb, n_bins, n_jobs, cloud_ptr=None):
         rows = _space_order(p, _radius_of(p, nb), cloud)
         sorted_nb = (np.empty((0, 3)), np.empty(0, np.int32))
         rows = (rows, np.empty(0, np.int64), *sorted_nb)
-        _pfh_reuse(*rows, *args, n_jobs, _pos_pool(p, n_jobs))
+        _pfh_reuse(*rows, *args, n_threads, _pos_pool(p, n_threads))
     else:
-        parallel_rows(pfh_rows, len(p), n_jobs, *args)
+        parallel_rows(pfh_rows, len(p), n_threads, *args)
     return out
 
 
-def _zeros(shape, dtype):
-    """A zeroed output array; a large one in its own anonymous memory map.
-
-    The C heap keeps a freed block below its (self-raising) mmap threshold,
-    so the output of one call would stay resident after the caller drops
-    it, and the next call's peak would add up with it. Mapped on its own,
-    an output goes back to the system with its last view; its pages are
-    zero, and resident from the start above 32 MiB (the kernels write them
-    all), as written below.
-    """
-    import mmap
-
-    nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
-    if nbytes < 1 << 20:
-        return np.zeros(shape, dtype=dtype)
-    if hasattr(mmap, "MAP_PRIVATE"):
-        # private: a shared anonymous map is shmem, slower to fault in.
-        # Populated at once: faulted in page by page from the kernel threads,
-        # the faults contend (PFH k=10, two threads: 1.6 s of system time
-        # against 0.3 s with one). Huge pages (MADV_HUGEPAGE, as numpy
-        # advises) are not asked for: on the benchmark VM they made the
-        # first call in a process on a 2.6M point cloud 1.5x slower
-        flags = mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS
-        if nbytes >= 32 << 20:  # small outputs: their pages as written
-            flags |= getattr(mmap, "MAP_POPULATE", 0)
-        buf = mmap.mmap(-1, nbytes, flags=flags)
-    else:
-        buf = mmap.mmap(-1, nbytes)
-    return np.frombuffer(buf, dtype=dtype).reshape(shape)
-
-
-def _pos_pool(p, n_jobs):
+def _pos_pool(p, n_threads):
     """The scratch of :func:`~skpcd.features._pfh_kernels.pfh_rows_reuse`,
     one per thread."""
-    from queue import SimpleQueue
-
     pool = SimpleQueue()
-    for _ in range(effective_threads(n_jobs)):
+    for _ in range(n_threads):
         pool.put(np.full(len(p), -1, dtype=np.int32))
     return pool
 
 
 def _pfh_reuse(
-    rows, point_of, xs, inv, p, n, indptr, indices, n_bins, out, n_jobs, pool
+    rows, point_of, xs, inv, p, n, indptr, indices, n_bins, out, n_threads, pool
 ):
     """PFH of the CSR rows ``rows`` (in that order) with pair codes reused
     (see :func:`~skpcd.features._pfh_kernels.pfh_rows_reuse`)."""
-    from skpcd.features._pfh_kernels import pfh_rows_reuse
 
     def run(lo, hi, *args):
         pos = pool.get()
@@ -197,7 +169,7 @@ def _pfh_reuse(
             pool.put(pos)
 
     args = (p, n, indptr, indices, n_bins, out)
-    parallel_rows(run, len(rows), n_jobs, *args, min_chunk=256)
+    parallel_rows(run, len(rows), n_threads, *args, min_chunk=256)
 
 
 def _radius_of(p, nb):
@@ -227,7 +199,7 @@ def _space_order(p, radius, cloud=None):
 _BLOCK = 2048
 
 
-def _pfh_radius_blocked(clouds, radius, n_bins, given, viewpoint, n_jobs):
+def _pfh_radius_blocked(clouds, radius, n_bins, given, viewpoint, n_threads):
     """PFH with a radius search, neighbourhoods block by block.
 
     Memory stays that of the output, the points and their normals: the
@@ -240,10 +212,6 @@ def _pfh_radius_blocked(clouds, radius, n_bins, given, viewpoint, n_jobs):
     points in ``mask`` are given, the others estimated. Returns ``out,
     undefined, offsets`` as :meth:`_LocalDescriptor._compute`.
     """
-    from skpcd.features._pfh_kernels import ROW_MIN
-    from skpcd.preprocessing import _grid_kernels as g
-    from skpcd.preprocessing._neighbors import build_grid, grid_shape
-
     release_free_memory()  # e.g. the pages of a previous call's output
     offsets = np.zeros(len(clouds) + 1, dtype=np.int64)
     np.cumsum([len(c) for c in clouds], out=offsets[1:])
@@ -255,42 +223,29 @@ def _pfh_radius_blocked(clouds, radius, n_bins, given, viewpoint, n_jobs):
         max_extent(np.float64),
         what="squared distances in float64 (the neighbour search)",
     )
-    origin, h, dims = grid_shape(xyz, offsets, np.full(len(clouds), radius), lo_hi)
-    order, cells = build_grid(xyz, offsets, origin, h, dims)
-    xs = g.gather_rows(xyz, order)
+    grid = radius_grid(xyz, offsets, radius, lo_hi)
+    order, cell_start = grid.order, grid.cell_start
     p, origins = local_frame(xyz, offsets)  # float32, each cloud in its frame
     viewpoints = (viewpoint - origins).astype(np.float32)
     del xyz
-    cell_start = cells[2]
-    search = (xs, order, *cells, dims, float(radius) ** 2)
     step = max(_BLOCK, n_pts // 64)
     bounds = np.unique(np.searchsorted(cell_start, np.arange(0, n_pts, step)))
     bounds = np.append(bounds[bounds < len(cell_start) - 1], len(cell_start) - 1)
-    none, none_i = np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int32)
-    f32 = np.empty((0, 3), dtype=np.float32)
-    no_normals = (f32, f32, f32, f32[:, 0])
-    few = {"min_chunk": 64}  # blocks are small: split them anyway
     # neighbourhood sizes in sorted order (the counts of the search)
     counts = np.empty(n_pts, dtype=np.int64)
 
-    def ball(c0, c1, *args):
-        t0 = int(cell_start[c0])
-
-        def run(lo, hi, *a):
-            g.ball_cells_local(c0 + lo, c0 + hi, t0, *a)
-
-        parallel_rows(run, c1 - c0, n_jobs, *search, *args, **few)
-
-    blocks = list(itertools.pairwise(bounds))
+    blocks = [
+        (cells, int(cell_start[cells[0]]), int(cell_start[cells[1]]))
+        for cells in itertools.pairwise(bounds)
+    ]
     given, mask = given
     if given is None or not mask.all():
         # normals straight from each ball, sorted, nothing stored
         n = np.empty((n_pts, 3), dtype=np.float32)
         curvature = np.empty(n_pts, dtype=np.float32)
         est = (p, viewpoints, n, curvature)
-        for c0, c1 in blocks:
-            t0, t1 = int(cell_start[c0]), int(cell_start[c1])
-            ball(c0, c1, none, counts[t0:t1], none_i, *est, True)
+        for cells, t0, t1 in blocks:
+            ball_block_normals(grid, radius, cells, counts[t0:t1], *est, n_threads)
         del curvature, est
         if given is not None:  # "auto" on clouds with and without normals
             n[mask] = given[mask]
@@ -298,49 +253,45 @@ def _pfh_radius_blocked(clouds, radius, n_bins, given, viewpoint, n_jobs):
     else:
         n = given
         del given, mask
-        for c0, c1 in blocks:
-            t0, t1 = int(cell_start[c0]), int(cell_start[c1])
-            ball(c0, c1, none, counts[t0:t1], none_i, *no_normals, True)
+        for cells, t0, t1 in blocks:
+            ball_block(grid, radius, cells, counts[t0:t1], n_threads)
     release_free_memory()  # the pages of the freed temporaries, before the output
-    out = _zeros((n_pts, n_bins**3), np.float32)
-    pool = _pos_pool(p, n_jobs)
+    out = unshared_zeros((n_pts, n_bins**3), np.float32)
+    pool = _pos_pool(p, n_threads)
     # each point's row in the grid order: pfh_rows_reuse orders the pairs
-    # of an unsorted ball by the search's own distances (xs)
+    # of an unsorted ball by the search's own distances (grid.xs)
     inv = np.empty(n_pts, dtype=np.int32)
     inv[order] = np.arange(n_pts, dtype=np.int32)
-    for c0, c1 in blocks:
-        t0, t1 = int(cell_start[c0]), int(cell_start[c1])
+    for cells, t0, t1 in blocks:
         indptr = np.zeros(t1 - t0 + 1, dtype=np.int64)
         np.cumsum(counts[t0:t1], out=indptr[1:])
         reuse = indptr[-1] >= ROW_MIN * (t1 - t0) and n_bins**3 < 2**15
-        indices = np.empty(indptr[-1], dtype=np.int32)
-        ball(c0, c1, indptr, counts[t0:t1], indices, *no_normals, not reuse)
+        block = (grid, radius, cells, counts[t0:t1], n_threads, indptr)
+        indices = ball_block(*block, sort=not reuse)
         point_of = order[t0:t1]
         args = (p, n, indptr, indices, n_bins, out)
         if reuse:
             cloud = np.searchsorted(offsets, point_of, side="right")
             rows = _space_order(p[point_of], radius, cloud)
-            _pfh_reuse(rows, point_of, xs, inv, *args, n_jobs, pool)
+            _pfh_reuse(rows, point_of, grid.xs, inv, *args, n_threads, pool)
         else:
-            _pfh_rows_local(point_of, *args, n_jobs)
+            _pfh_rows_local(point_of, *args, n_threads)
         del indptr, indices
     sizes = np.empty(n_pts, dtype=np.int64)
     sizes[order] = counts
-    del pool, inv, xs, counts
+    del pool, inv, grid, counts
     release_free_memory()  # the blocks' scratch, not kept for the next call
     undefined = ~np.isfinite(n).all(axis=1) | (sizes < 2)
     return out, undefined, offsets
 
 
-def _pfh_rows_local(point_of, p, n, indptr, indices, n_bins, out, n_jobs):
+def _pfh_rows_local(point_of, p, n, indptr, indices, n_bins, out, n_threads):
     """:func:`pfh_rows` on a CSR whose row ``r`` is point ``point_of[r]``:
     the PFH rows computed in a block and scattered into ``out``."""
-    from skpcd.features._pfh_kernels import pfh_rows
-
     block = np.zeros((len(point_of), n_bins**3), dtype=np.float32)
     # pfh_rows reads the query point only through its neighbourhood
     args = (p, n, indptr, indices, n_bins, block)
-    parallel_rows(pfh_rows, len(point_of), n_jobs, *args, min_chunk=256)
+    parallel_rows(pfh_rows, len(point_of), n_threads, *args, min_chunk=256)
     out[point_of] = block
 
 
@@ -348,15 +299,13 @@ def _pfh_rows_local(point_of, p, n, indptr, indices, n_bins, out, n_jobs):
 _TABLE_PAIRS = 255
 
 
-def _spfh_counts(p, n, nb, n_bins, n_jobs, pack=False):
+def _spfh_counts(p, n, nb, n_bins, n_threads, pack=False):
     """SPFH as pair counts per bin, and the table of PCL's increment sums.
 
     One byte per bin (two above 255 neighbours), not a float32's four; with
     ``pack``, and no point with more than 15 pairs, two 4-bit counts per byte
     (see :func:`~skpcd.features._pfh_kernels.spfh_rows`).
     """
-    from skpcd.features import _pfh_kernels as k
-
     max_pairs = max(int(nb.sizes.max(initial=1)) - 1, 1)
     dtype = (
         np.uint8 if max_pairs <= 255 else np.uint16 if max_pairs < 2**16 else np.uint32
@@ -366,34 +315,30 @@ def _spfh_counts(p, n, nb, n_bins, n_jobs, pack=False):
         width = (width + 1) // 2
     counts = np.zeros((len(p), width), dtype=dtype)
     args = (p, n, nb.indptr, nb.indices, n_bins, counts)
-    parallel_rows(k.spfh_rows, len(p), n_jobs, *args)
-    return counts, k.increment_sums(min(max_pairs, _TABLE_PAIRS))
+    parallel_rows(spfh_rows, len(p), n_threads, *args)
+    return counts, increment_sums(min(max_pairs, _TABLE_PAIRS))
 
 
-def _spfh(p, n, nb, n_bins, n_jobs=None):
+def _spfh(p, n, nb, n_bins, n_threads=1):
     """SPFH of every point as PCL's float32 values, (n, 3 * n_bins)."""
-    from skpcd.features._pfh_kernels import spfh_values
-
-    counts, table = _spfh_counts(p, n, nb, n_bins, n_jobs)
+    counts, table = _spfh_counts(p, n, nb, n_bins, n_threads)
     out = np.empty(counts.shape, dtype=np.float32)
-    parallel_rows(spfh_values, len(p), n_jobs, counts, nb.indptr, table, out)
+    parallel_rows(spfh_values, len(p), n_threads, counts, nb.indptr, table, out)
     return out
 
 
-def _fpfh_packed(p, n, nb, n_bins, convention, n_jobs):
+def _fpfh_packed(p, n, nb, n_bins, convention, n_threads):
     """SPFH (as pair counts) then FPFH kernels over float32 packed arrays."""
-    counts, table = _spfh_counts(p, n, nb, n_bins, n_jobs, pack=True)
-    return _fpfh_from_counts(p, counts, table, nb, n_bins, convention, n_jobs)
+    counts, table = _spfh_counts(p, n, nb, n_bins, n_threads, pack=True)
+    return _fpfh_from_counts(p, counts, table, nb, n_bins, convention, n_threads)
 
 
-def _fpfh_from_counts(p, counts, table, nb, n_bins, convention, n_jobs):
+def _fpfh_from_counts(p, counts, table, nb, n_bins, convention, n_threads):
     """FPFH from the SPFH pair counts of :func:`_spfh_counts`."""
-    from skpcd.features._pfh_kernels import fpfh_rows
-
     mode = FPFH_CONVENTIONS.index(convention)
-    out = _zeros((len(p), 3 * n_bins), np.float64 if mode == 2 else np.float32)
+    out = unshared_zeros((len(p), 3 * n_bins), np.float64 if mode == 2 else np.float32)
     args = (p, counts, nb.indptr, nb.indices, table, n_bins, mode, out)
-    parallel_rows(fpfh_rows, len(p), n_jobs, *args)
+    parallel_rows(fpfh_rows, len(p), n_threads, *args)
     return out.astype(np.float32, copy=False)
 
 
@@ -454,12 +399,13 @@ def compute_fpfh(
         raise ValueError(
             f"convention must be one of {FPFH_CONVENTIONS}, got {convention!r}"
         )
-    nb = _neighborhoods(points, neighborhoods, n_neighbors, radius, n_jobs)
+    n_threads = effective_threads(n_jobs)
+    nb = _neighborhoods(points, neighborhoods, n_neighbors, radius, n_threads)
     p, n = _as_f32(points, normals, nb)
-    return _fpfh_packed(p, n, nb, int(n_bins), convention, n_jobs)
+    return _fpfh_packed(p, n, nb, int(n_bins), convention, n_threads)
 
 
-class _LocalDescriptor(TransformerMixin, BaseEstimator):
+class _LocalDescriptor(CloudTransformer):
     """Shared machinery of the per-point histogram transformers."""
 
     _parameter_constraints: typing.ClassVar[dict] = {
@@ -486,7 +432,14 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
             raise ValueError("give normal_n_neighbors or normal_radius, not both")
         _check_viewpoint(self.viewpoint)
 
+    @property
+    def _bounded_batches(self):
+        # pooled: one row per cloud, so the per-point rows of one batch at a
+        # time, not of all clouds, are held (bounded memory)
+        return self.pooling is not None
+
     def _validate(self, X):
+        self._check_search()
         clouds = check_point_clouds(X, ensure_all_finite=False)
         for i, c in enumerate(clouds):
             if not np.isfinite(c[:, :3]).all():
@@ -522,60 +475,14 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         mask = np.repeat(np.asarray(given), [len(c) for c in clouds])
         return np.vstack(blocks).astype(np.float32), mask
 
-    @_fit_context(prefer_skip_nested_validation=True)
-    def fit(self, X, y=None):
-        """Check the parameters and the clouds; nothing is learned.
-
-        Parameters
-        ----------
-        X : sequence of ndarray of shape (n_points_i, 3+)
-            The clouds, xyz first; with ``normals="auto"`` (the default)
-            columns 3-5 of a cloud with 6 or more columns are its normals.
-        y : None
-            Ignored.
-
-        Returns
-        -------
-        self : object
-            The transformer.
-        """
-        self._fit_clouds(X)
-        return self
-
-    @_fit_context(prefer_skip_nested_validation=True)
-    def fit_transform(self, X, y=None):
-        """Fit and transform, checking the clouds once.
-
-        Parameters
-        ----------
-        X : sequence of ndarray of shape (n_points_i, 3+)
-            The clouds, xyz first; with ``normals="auto"`` (the default)
-            columns 3-5 of a cloud with 6 or more columns are its normals.
-        y : None
-            Ignored.
-
-        Returns
-        -------
-        descriptors : list of ndarray or ndarray
-            As :meth:`transform`.
-        """
-        return self._transform(X, self._fit_clouds(X))
-
-    def _fit_clouds(self, X):
-        """What :meth:`fit` checks and sets; returns the validated clouds."""
-        self._check_search()
-        clouds = self._validate(X)
-        self.n_features_in_ = clouds[0].shape[1]
-        return clouds
-
-    def _compute(self, clouds, n_jobs):
+    def _compute(self, clouds, n_threads):
         """Packed descriptors, the undefined-point mask and the cloud offsets
-        of validated clouds, the kernels on ``n_jobs`` threads."""
+        of validated clouds, the kernels on ``n_threads`` threads."""
         k = self.n_neighbors
         if k is None and self.radius is None:
             k = self._default_n_neighbors
         xyz, offsets, nb = pack_neighborhoods(
-            clouds, n_neighbors=k, radius=self.radius, n_jobs=n_jobs,
+            clouds, n_neighbors=k, radius=self.radius, n_threads=n_threads,
             with_sqdist=False,
         )  # fmt: skip
         # float32 as PCL, each cloud in its local frame (far from the origin:
@@ -591,25 +498,31 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
                     clouds,
                     n_neighbors=self.normal_n_neighbors,
                     radius=self.normal_radius,
-                    n_jobs=n_jobs,
+                    n_threads=n_threads,
                     with_sqdist=False,
                 )
             vp = _check_viewpoint(self.viewpoint) - origins
-            n = _normals_f32(p, nnb, vp, n_jobs, offsets)[0]
+            n = _normals_f32(p, nnb, vp, n_threads, offsets)[0]
             del nnb
             if given is not None:  # "auto" on clouds with and without normals
                 n[mask] = given[mask]
         del xyz, given, mask  # the descriptors work in float32
         undefined = ~np.isfinite(n).all(axis=1) | (nb.sizes < 2)
-        # the kernel takes the normals out of the list: they are freed as
-        # soon as it no longer needs them (FPFH: after the SPFH)
-        normals = [n]
-        del n
         # the search's temporaries are freed: return their pages to the system
-        # before the kernels allocate the output (lower peak memory)
+        # before the kernels allocate their outputs (lower peak memory)
         release_free_memory()
-        out = self._kernel(p, normals, nb, offsets, n_jobs)
+        pairs = self._pair_stage(p, n, nb, offsets, n_threads)
+        del n  # no later stage reads the normals: freed before its output
+        out = self._final_stage(p, pairs, nb, n_threads)
         return out, undefined, offsets
+
+    def _pair_stage(self, p, n, nb, offsets, n_threads):
+        """The kernels that read the normals (the pair features)."""
+        raise NotImplementedError
+
+    def _final_stage(self, p, pairs, nb, n_threads):
+        """The kernels after the normals are freed; by default none."""
+        return pairs
 
     def undefined_mask(self, X):
         """Which points have an undefined descriptor.
@@ -630,12 +543,10 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
         masks : list of ndarray of bool of shape (n_points_i,)
             True for the points whose descriptor is undefined.
         """
-        self._check_search()
-        clouds = self._validate(X)
-        return map_batches(self._undefined_batch, clouds, self.n_jobs)
+        return map_batches(self._undefined_batch, self._validate(X), self.n_jobs)
 
-    def _undefined_batch(self, clouds, n_jobs):
-        _, undefined, offsets = self._compute(clouds, n_jobs)
+    def _undefined_batch(self, clouds, n_threads):
+        _, undefined, offsets = self._compute(clouds, n_threads)
         return [undefined[offsets[i] : offsets[i + 1]] for i in range(len(offsets) - 1)]
 
     def transform(self, X):
@@ -653,20 +564,11 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
             One float32 array per cloud, a row per point (fewer with
             ``undefined="drop"``); with ``pooling``, one row per cloud.
         """  # noqa: E501
-        return self._transform(X)
+        return super().transform(X)
 
-    def _transform(self, X, clouds=None):
-        self._check_search()
-        if clouds is None:
-            clouds = self._validate(X)
-        # pooled: one row per cloud, so the per-point rows of one batch at a
-        # time, not of all clouds, are held (bounded memory)
-        bounded = self.pooling is not None
-        return map_batches(self._transform_batch, clouds, self.n_jobs, bounded=bounded)
-
-    def _transform_batch(self, clouds, n_jobs):
+    def _transform_batch(self, clouds, n_threads):
         """:meth:`transform` of validated clouds (one batch of them)."""
-        out, undefined, offsets = self._compute(clouds, n_jobs)
+        out, undefined, offsets = self._compute(clouds, n_threads)
         if self.undefined == "nan":
             out[undefined] = np.nan
         elif self.undefined == "zero":
@@ -704,9 +606,7 @@ class _LocalDescriptor(TransformerMixin, BaseEstimator):
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
-        tags.input_tags.two_d_array = False
         tags.input_tags.allow_nan = True
-        tags.requires_fit = False
         return tags
 
 
@@ -857,20 +757,19 @@ class PFHTransformer(_LocalDescriptor):
     def _width(self):
         return int(self.n_bins) ** 3
 
-    def _compute(self, clouds, n_jobs):
+    def _compute(self, clouds, n_threads):
         if self.radius is None or not (
             self.normal_n_neighbors is None and self.normal_radius is None
         ):
-            return super()._compute(clouds, n_jobs)
+            return super()._compute(clouds, n_threads)
         # radius search: neighbourhoods block by block (memory)
         given = self._given_normals(clouds)
         vp = _check_viewpoint(self.viewpoint)
-        args = (float(self.radius), int(self.n_bins), given, vp, n_jobs)
+        args = (float(self.radius), int(self.n_bins), given, vp, n_threads)
         return _pfh_radius_blocked(clouds, *args)
 
-    def _kernel(self, p, normals, nb, offsets, n_jobs):
-        n_bins = int(self.n_bins)
-        return _pfh_packed(p, normals.pop(), nb, n_bins, n_jobs, offsets)
+    def _pair_stage(self, p, n, nb, offsets, n_threads):
+        return _pfh_packed(p, n, nb, int(self.n_bins), n_threads, offsets)
 
 
 class FPFHTransformer(_LocalDescriptor):
@@ -949,10 +848,13 @@ class FPFHTransformer(_LocalDescriptor):
     def _width(self):
         return 3 * int(self.n_bins)
 
-    def _kernel(self, p, normals, nb, offsets, n_jobs):
-        n_bins = int(self.n_bins)
-        counts, table = _spfh_counts(p, normals.pop(), nb, n_bins, n_jobs, pack=True)
+    def _pair_stage(self, p, n, nb, offsets, n_threads):
+        """SPFH as pair counts: the only FPFH stage that reads the normals."""
+        return _spfh_counts(p, n, nb, int(self.n_bins), n_threads, pack=True)
+
+    def _final_stage(self, p, pairs, nb, n_threads):
+        counts, table = pairs
         # the normals are gone: hand their pages back before the output
         release_free_memory()
-        args = (p, counts, table, nb, n_bins, self.convention, n_jobs)
+        args = (p, counts, table, nb, int(self.n_bins), self.convention, n_threads)
         return _fpfh_from_counts(*args)

@@ -5,9 +5,7 @@ import typing
 import numpy as np
 
 from skpcd.features._overall import _check_size_extents, box_dimensions
-from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
-from skpcd.utils._parallel import map_batches
 
 __all__ = ["ShapeFeatures", "shape_features"]
 
@@ -122,11 +120,6 @@ def shape_features(points):
     )
 
 
-def _shape_batch(clouds, n_jobs):
-    """The features of a batch of clouds, one row each."""
-    return np.vstack([shape_features(c) for c in clouds])
-
-
 class ShapeFeatures(CloudTransformer):
     """Global shape features of each segment (size, eigenvalues, height profile).
 
@@ -199,9 +192,16 @@ class ShapeFeatures(CloudTransformer):
         features : ndarray of shape (n_segments, 18)
             One row per segment.
         """
-        clouds = check_point_clouds(X)
+        return super().transform(X)
+
+    def _validate(self, X):
+        clouds = super()._validate(X)
         _check_size_extents(clouds)
-        return map_batches(_shape_batch, clouds)
+        return clouds
+
+    def _transform_batch(self, clouds, n_threads):
+        """The features of a batch of clouds, one row each."""
+        return np.vstack([shape_features(c) for c in clouds])
 
     def get_feature_names_out(self, input_features=None):
         """Names of the output features.

@@ -19,6 +19,11 @@ and scans the 27 cells around the point once.
 
 Neighbours come sorted by squared distance (float64, from float64
 coordinates), ties by index, the query point itself first.
+
+The kernels take the grid as one argument, a
+:class:`~skpcd.preprocessing._grid.VoxelGrid` (a NamedTuple of arrays,
+which numba passes as a tuple); :mod:`skpcd.preprocessing._grid` builds it
+and holds the entry points that other packages call.
 """
 
 import math
@@ -26,7 +31,6 @@ import math
 import numpy as np
 from numba import njit
 
-from skpcd.preprocessing._normals_kernels import _normal_row
 from skpcd.utils._numba import borrow, keep
 
 # Cells per axis stay below this, so a cell key fits in an int64.
@@ -91,8 +95,9 @@ def sorted_cells(sorted_keys, cloud_ptr):
 
 
 @njit(cache=True, nogil=True)
-def cells_with(flag, order, cell_start):
+def cells_with(flag, grid):
     """The cells holding at least one point flagged in ``flag``."""
+    order, cell_start = grid.order, grid.cell_start
     m = len(cell_start) - 1
     keep = np.zeros(m, dtype=np.bool_)
     for cell in range(m):
@@ -251,29 +256,26 @@ def _write_row(indices, sqdist, base, i, bi, bd, m):
 
 
 @njit(cache=True, nogil=True)
-def knn_cells(
-    lo, hi, cells, xs, order, cell_cloud, cell_key, cell_start, cloud_cells,
-    origin, h, dims, indptr, max_shell, todo, indices, sqdist, hard,
-):  # fmt: skip
+def knn_cells(lo, hi, cells, grid, indptr, max_shell, todo, indices, sqdist, hard):
     """k nearest neighbours of the points of the cells ``cells[lo:hi]``.
 
-    ``xs`` holds the points sorted by cell (``xyz[order]``); ``indptr``
-    gives each point's k. With ``todo`` non-empty, only the points flagged
+    ``grid.xs`` holds the points sorted by cell; ``indptr`` gives each
+    point's k. With ``todo`` non-empty, only the points flagged
     there are answered. An empty ``sqdist`` is not filled. Rows of points
     that need more than ``max_shell`` shells are flagged in ``hard`` and not
     filled. Arrays are borrowed (:func:`~skpcd.utils._numba.borrow`): the
     inlined helpers that take them cost no atomic reference counting.
     """
     cells = borrow(cells)
-    xs = borrow(xs)
-    order = borrow(order)
-    cell_cloud = borrow(cell_cloud)
-    cell_key = borrow(cell_key)
-    cell_start = borrow(cell_start)
-    cloud_cells = borrow(cloud_cells)
-    origin = borrow(origin)
-    h = borrow(h)
-    dims = borrow(dims)
+    xs = borrow(grid.xs)
+    order = borrow(grid.order)
+    cell_cloud = borrow(grid.cell_cloud)
+    cell_key = borrow(grid.cell_key)
+    cell_start = borrow(grid.cell_start)
+    cloud_cells = borrow(grid.cloud_cells)
+    origin = borrow(grid.origin)
+    h = borrow(grid.h)
+    dims = borrow(grid.dims)
     indptr = borrow(indptr)
     todo = borrow(todo)
     indices = borrow(indices)
@@ -446,70 +448,63 @@ def knn_cells(
 
 
 @njit(cache=True, nogil=True)
-def ball_cells(
-    lo, hi, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2,
-    indptr, counts, indices, sqdist,
-):  # fmt: skip
+def ball_cells(lo, hi, grid, r2, indptr, counts, indices, sqdist):
     """Radius neighbours of the points of cells ``lo`` to ``hi``.
 
     With ``indptr`` empty, writes the counts (the point included);
     otherwise fills ``indices`` and ``sqdist`` (unless empty), each row
     sorted by (distance, index), the point first.
     """
-    f32 = np.empty((0, 3), dtype=np.float32)
-    f1 = np.empty(0, dtype=np.float32)
     _ball(
-        lo, hi, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2,
-        indptr, counts, indices, sqdist, -1, f32, f32, f32, f1, True,
+        lo, hi, grid, r2, indptr, counts, indices, sqdist, -1, True,
+        _no_sink, (), False,
     )  # fmt: skip
 
 
 @njit(cache=True, nogil=True)
-def ball_cells_local(
-    lo, hi, base, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims,
-    r2, indptr, counts, indices, points, viewpoints, normals, curvature, sort,
-):  # fmt: skip
+def ball_cells_local(lo, hi, base, grid, r2, indptr, counts, indices, sort):
     """:func:`ball_cells` with rows numbered by sorted position: the point
-    at position ``t`` of ``order`` is row ``t - base`` of ``counts`` and of
-    the CSR ``indptr``/``indices`` (no squared distances), so that a block
-    of cells gets its own small neighbourhood arrays. With ``normals``
-    non-empty, nothing is stored but the counts and each point's normal and
-    curvature (:func:`~skpcd.preprocessing._normals_kernels.normals_rows`
-    on the sorted neighbourhood, float32 ``points`` in their clouds' local
-    frames, ``viewpoints`` one row per cloud in the same frames). Rows are
-    sorted only with ``sort``."""
+    at position ``t`` of ``grid.order`` is row ``t - base`` of ``counts``
+    and of the CSR ``indptr``/``indices`` (no squared distances), so that a
+    block of cells gets its own small neighbourhood arrays. With ``indptr``
+    empty, only the counts. Rows are sorted only with ``sort``."""
+    sqdist = indices[:0].astype(np.float32)
     _ball(
-        lo, hi, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2,
-        indptr, counts, indices, indices[:0].astype(np.float32), base,
-        points, viewpoints, normals, curvature, sort or len(normals) > 0,
+        lo, hi, grid, r2, indptr, counts, indices, sqdist, base, sort,
+        _no_sink, (), False,
     )  # fmt: skip
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _no_sink(args, row, i, c, bi, bd, m):
+    """The sink of the kernels that store the balls: never called."""
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _ball(
-    lo, hi, xs, order, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2,
-    indptr, counts, indices, sqdist, base, points, viewpoints, normals, curvature,
-    sort,
+    lo, hi, grid, r2, indptr, counts, indices, sqdist, base, sort, sink, sink_args,
+    with_sink,
 ):  # fmt: skip
     """The body of :func:`ball_cells` (rows by point, ``base`` < 0) and
-    :func:`ball_cells_local` (rows by sorted position minus ``base``)."""
-    with_normals = len(normals) > 0
-    fill = len(indptr) > 0 or with_normals
-    xs = borrow(xs)
-    order = borrow(order)
-    cell_cloud = borrow(cell_cloud)
-    cell_key = borrow(cell_key)
-    cell_start = borrow(cell_start)
-    cloud_cells = borrow(cloud_cells)
-    dims = borrow(dims)
+    :func:`ball_cells_local` (rows by sorted position minus ``base``).
+
+    With ``with_sink``, nothing is stored: each sorted ball goes to
+    ``sink(sink_args, row, i, cloud, bi, bd, m)`` (the point first in
+    ``bi[:m]``, squared distances in ``bd``), e.g. a normal estimated from
+    it (:func:`~skpcd.preprocessing._normals_kernels.ball_normals`)."""
+    fill = len(indptr) > 0 or with_sink
+    sort = sort or with_sink
+    xs = borrow(grid.xs)
+    order = borrow(grid.order)
+    cell_cloud = borrow(grid.cell_cloud)
+    cell_key = borrow(grid.cell_key)
+    cell_start = borrow(grid.cell_start)
+    cloud_cells = borrow(grid.cloud_cells)
+    dims = borrow(grid.dims)
     indptr = borrow(indptr)
     counts = borrow(counts)
     indices = borrow(indices)
     sqdist = borrow(sqdist)
-    points = borrow(points)
-    viewpoints = borrow(viewpoints)
-    normals = borrow(normals)
-    curvature = borrow(curvature)
     # scratch for a ball, grown to the points of the 27 cells when needed
     cap = 64
     f_own = np.empty((2, cap))
@@ -523,8 +518,6 @@ def _ball(
     cur = borrow(i_own[:9])
     starts = borrow(i_own[9:18])
     stops = borrow(i_own[18:])
-    ends_own = np.zeros(2, dtype=np.int64)
-    ends = borrow(ends_own)
     for cell in range(lo, hi):
         n_runs = cell_block(
             cell, cell - 1 if cell > lo else -1, cell_cloud, cell_key, cell_start,
@@ -591,19 +584,14 @@ def _ball(
                     b -= 1
                 bd[b] = d
                 bi[b] = j
-            if with_normals:
+            if with_sink:
                 counts[row] = m
-                bi[0] = i  # the point first, as _write_row stores it
-                ends[1] = m
-                c = cell_cloud[cell]
-                vx, vy, vz = viewpoints[c, 0], viewpoints[c, 1], viewpoints[c, 2]
-                _normal_row(points, ends, bi, vx, vy, vz, normals, curvature, 0, i)
+                sink(sink_args, row, i, cell_cloud[cell], bi, bd, m)
                 continue
             _write_row(indices, sqdist, indptr[row], i, bi, bd, m)
     keep(f_own)
     keep(b_own)
     keep(i_own)
-    keep(ends_own)
     keep(k_own)
 
 

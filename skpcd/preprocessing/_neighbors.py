@@ -16,6 +16,15 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from skpcd.preprocessing import _grid_kernels as g
+from skpcd.preprocessing._grid import (
+    VoxelGrid,
+    ball_counts,
+    ball_lists,
+    build_grid,
+    grid_shape,
+    sort_points,
+)
 from skpcd.utils._parallel import effective_threads, parallel_rows
 from skpcd.utils._validation import check_extents, cloud_bounds, max_extent
 
@@ -132,7 +141,7 @@ def compute_neighborhoods(
         np.array([0, len(xyz)], dtype=np.int64),
         n_neighbors=n_neighbors,
         radius=radius,
-        n_jobs=n_jobs,
+        n_threads=effective_threads(n_jobs),
         algorithm=algorithm,
     )
 
@@ -158,7 +167,7 @@ def search_packed(
     *,
     n_neighbors=None,
     radius=None,
-    n_jobs=None,
+    n_threads=1,
     algorithm="auto",
     with_sqdist=True,
 ):
@@ -170,8 +179,10 @@ def search_packed(
         All points; cloud ``c`` is ``xyz[cloud_ptr[c]:cloud_ptr[c + 1]]``.
     cloud_ptr : ndarray of shape (n_clouds + 1,), int64
         Offsets of the clouds.
-    n_neighbors, radius, n_jobs, algorithm
+    n_neighbors, radius, algorithm
         As in :func:`compute_neighborhoods`.
+    n_threads : int, default=1
+        Threads for the queries.
     with_sqdist : bool, default=True
         False leaves ``sqdist`` empty (the grid search), to save memory when
         only the indices are needed.
@@ -201,10 +212,8 @@ def search_packed(
         )
     if algorithm == "kd_tree":
         if n_neighbors is not None:
-            return _knn_kd_tree(xyz, cloud_ptr, indptr, None, n_jobs)
-        return _radius_kd_tree(xyz, cloud_ptr, float(radius), n_jobs)
-    from skpcd.preprocessing import _grid_kernels as g
-
+            return _knn_kd_tree(xyz, cloud_ptr, indptr, None, n_threads)
+        return _radius_kd_tree(xyz, cloud_ptr, float(radius), n_threads)
     n = len(xyz)
     if n_neighbors is not None:
         nb = Neighborhoods(
@@ -214,15 +223,11 @@ def search_packed(
         )
         hard = np.zeros(n, dtype=np.bool_)
         todo = np.zeros(0, dtype=np.bool_)
-        origin, h, dims, order, cells = _knn_grid(
-            xyz, cloud_ptr, int(n_neighbors), lo_hi
-        )
-        rows = np.arange(len(cells[1]))
+        grid = _knn_grid(xyz, cloud_ptr, int(n_neighbors), lo_hi)
+        rows = np.arange(grid.n_cells)
         for attempt in range(_COARSER):
-            xs = g.gather_rows(xyz, order)
-            args = (rows, xs, order, *cells, origin, h, dims, indptr)
-            out = (_MAX_SHELL, todo, nb.indices, nb.sqdist, hard)
-            parallel_rows(g.knn_cells, len(rows), n_jobs, *args, *out)
+            args = (rows, grid, indptr, _MAX_SHELL, todo, nb.indices, nb.sqdist, hard)
+            parallel_rows(g.knn_cells, len(rows), n_threads, *args)
             if not hard.any():
                 return nb
             todo, hard = hard, np.zeros(n, dtype=np.bool_)
@@ -230,110 +235,51 @@ def search_packed(
             cloud = np.searchsorted(cloud_ptr, which, side="right") - 1
             if sizes[cloud].sum() <= _BRUTE_WORK:
                 args = (which, cloud, xyz, cloud_ptr, indptr, nb.indices, nb.sqdist)
-                parallel_rows(g.knn_brute, len(which), n_jobs, *args)
+                parallel_rows(g.knn_brute, len(which), n_threads, *args)
                 return nb
             if attempt == _COARSER - 1:
                 break
             # isolated points: again on cells four times wider
-            origin, h, dims = grid_shape(xyz, cloud_ptr, 4 * h, lo_hi)
-            order, cells = build_grid(xyz, cloud_ptr, origin, h, dims)
-            rows = g.cells_with(todo, order, cells[2])
-        _knn_kd_tree(xyz, cloud_ptr, indptr, np.flatnonzero(todo), n_jobs, nb)
+            grid = build_grid(xyz, cloud_ptr, 4 * grid.h, lo_hi)
+            rows = g.cells_with(todo, grid)
+        _knn_kd_tree(xyz, cloud_ptr, indptr, np.flatnonzero(todo), n_threads, nb)
         return nb
-    origin, h, dims = grid_shape(xyz, cloud_ptr, np.full(len(sizes), radius), lo_hi)
-    order, cells = build_grid(xyz, cloud_ptr, origin, h, dims)
-    args = (g.gather_rows(xyz, order), order, *cells, dims, float(radius) ** 2)
-    counts = np.empty(n, dtype=np.int64)
-    none_i, none_f = np.empty(0, dtype=np.int32), np.empty(0, dtype=np.float32)
-    n_cells = len(cells[1])
-    empty = (indptr[:0], counts, none_i, none_f)
-    parallel_rows(g.ball_cells, n_cells, n_jobs, *args, *empty)
+    grid = build_grid(xyz, cloud_ptr, np.full(len(sizes), radius), lo_hi)
+    counts = ball_counts(grid, radius, n_threads)
     np.cumsum(counts, out=indptr[1:])
     nb = Neighborhoods(
         indptr,
         np.empty(indptr[-1], dtype=np.int32),
         np.empty(indptr[-1] if with_sqdist else 0, dtype=np.float32),
     )
-    parallel_rows(
-        g.ball_cells, n_cells, n_jobs, *args, indptr, counts, nb.indices, nb.sqdist
-    )
+    ball_lists(grid, radius, indptr, counts, nb.indices, nb.sqdist, n_threads)
     return nb
-
-
-def build_grid(xyz, cloud_ptr, origin, h, dims):
-    """Points sorted by (cloud, cell key), and the cells.
-
-    Internal API shared with :mod:`skpcd.segmentation` and
-    :mod:`skpcd.features` (not re-exported by :mod:`skpcd.preprocessing`).
-
-    Returns ``order`` (point indices in that order) and the tuple
-    ``(cell_cloud, cell_key, cell_start, cloud_cells)`` of
-    :func:`~skpcd.preprocessing._grid_kernels.sorted_cells`.
-    """
-    from skpcd.preprocessing import _grid_kernels as g
-
-    sizes = np.diff(cloud_ptr)
-    keys = np.empty(len(xyz), dtype=np.int64)
-    g.cell_keys(xyz, cloud_ptr, origin, h, dims, keys)
-    n_keys = np.prod(dims.astype(np.float64), axis=1)
-    if n_keys.sum() < 2.0**62:
-        # one sort: cloud c's keys shifted past the keys of the clouds before;
-        # a radix sort, a few passes of 11 bits (3x faster than np.argsort)
-        base = np.concatenate([[0], np.cumsum(np.prod(dims, axis=1))[:-1]])
-        g.shift_keys(keys, cloud_ptr, base, 1)
-        order, keys = g.radix_argsort(keys)
-        g.shift_keys(keys, cloud_ptr, base, -1)
-        return order, g.sorted_cells(keys, cloud_ptr)
-    else:
-        cloud = np.repeat(np.arange(len(sizes)), sizes)
-        order = np.lexsort((keys, cloud))
-    return order, g.sorted_cells(keys[order], cloud_ptr)
-
-
-_extents = cloud_bounds
-
-
-def grid_shape(xyz, cloud_ptr, h, lo_hi=None):
-    """Origins, cell sizes (at least ``h``, above the radius) and grid shapes.
-
-    Internal API shared with :mod:`skpcd.segmentation` and
-    :mod:`skpcd.features` (not re-exported by :mod:`skpcd.preprocessing`).
-    """
-    from skpcd.preprocessing._grid_kernels import MAX_DIM
-
-    lo, hi = _extents(xyz, cloud_ptr) if lo_hi is None else lo_hi
-    extent = hi - lo
-    # cells a hair wider than asked: a radius query's 27 cells cover the ball
-    # whatever the rounding of cell coordinates
-    h = np.maximum(h * (1 + 1e-9), extent.max(axis=1) / (MAX_DIM - 2))
-    h = np.where(h > 0, h, 1.0)
-    dims = (np.floor(extent / h[:, None]) + 1).astype(np.int64)
-    return lo, h, dims
 
 
 def _knn_grid(xyz, cloud_ptr, k, lo_hi=None):
     """Grid for k-nearest searches, cell sizes adapted to each cloud's density.
 
-    Returns ``origin, h, dims`` and :func:`build_grid`'s ``order, cells``.
+    Returns the :class:`~skpcd.preprocessing._grid.VoxelGrid`.
     """
     sizes = np.diff(cloud_ptr)
     target = max(1.0, _OCCUPANCY * k)
-    lo, hi = _extents(xyz, cloud_ptr) if lo_hi is None else lo_hi
+    lo, hi = cloud_bounds(xyz, cloud_ptr) if lo_hi is None else lo_hi
     e = np.sort(hi - lo, axis=1)
     # first guess: points spread over the largest face of the bounding box
     area = e[:, 2] * np.maximum(e[:, 1], 1e-3 * e[:, 2])
     h = np.sqrt(area * target / np.maximum(sizes, 1))
     for _ in range(3):
         origin, h, dims = grid_shape(xyz, cloud_ptr, h, (lo, hi))
-        order, cells = build_grid(xyz, cloud_ptr, origin, h, dims)
-        occupancy = sizes / np.maximum(np.diff(cells[3]), 1)
+        order, cells = sort_points(xyz, cloud_ptr, origin, h, dims)
+        cloud_cells = cells[3]
+        occupancy = sizes / np.maximum(np.diff(cloud_cells), 1)
         off = (occupancy < target / 2) | (occupancy > target * 2)
         off &= sizes > 4 * target
         if not off.any():
             break
         # occupancy grows like h**2 on the surfaces LiDAR samples
         h = h * np.where(off, np.clip(np.sqrt(target / occupancy), 0.25, 4.0), 1.0)
-    return origin, h, dims, order, cells
+    return VoxelGrid(g.gather_rows(xyz, order), order, *cells, origin, h, dims)
 
 
 def _sqdist(xyz, rows, idx):
@@ -341,7 +287,7 @@ def _sqdist(xyz, rows, idx):
     return (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2]
 
 
-def _knn_kd_tree(xyz, cloud_ptr, indptr, which, n_jobs, nb=None):
+def _knn_kd_tree(xyz, cloud_ptr, indptr, which, n_threads, nb=None):
     """k nearest with cKDTree, for all points or the points ``which``."""
     if nb is None:
         nb = Neighborhoods(
@@ -349,7 +295,7 @@ def _knn_kd_tree(xyz, cloud_ptr, indptr, which, n_jobs, nb=None):
             np.empty(indptr[-1], dtype=np.int32),
             np.empty(indptr[-1], dtype=np.float32),
         )
-    workers = effective_threads(n_jobs)
+    workers = n_threads
     for c in range(len(cloud_ptr) - 1):
         start, stop = int(cloud_ptr[c]), int(cloud_ptr[c + 1])
         if which is None:
@@ -375,9 +321,9 @@ def _knn_kd_tree(xyz, cloud_ptr, indptr, which, n_jobs, nb=None):
     return nb
 
 
-def _radius_kd_tree(xyz, cloud_ptr, radius, n_jobs):
+def _radius_kd_tree(xyz, cloud_ptr, radius, n_threads):
     """Radius neighbourhoods with cKDTree."""
-    workers = effective_threads(n_jobs)
+    workers = n_threads
     lists = []
     for c in range(len(cloud_ptr) - 1):
         start, stop = int(cloud_ptr[c]), int(cloud_ptr[c + 1])

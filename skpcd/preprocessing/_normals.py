@@ -10,9 +10,10 @@ from skpcd.preprocessing._neighbors import (
     compute_neighborhoods,
     search_packed,
 )
+from skpcd.preprocessing._normals_kernels import normals_rows
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
-from skpcd.utils._parallel import map_batches, parallel_rows
+from skpcd.utils._parallel import effective_threads, parallel_rows
 from skpcd.utils._validation import local_frame
 
 __all__ = ["NormalEstimator", "estimate_normals"]
@@ -97,9 +98,10 @@ def estimate_normals(
     if xyz.ndim != 2 or not np.isfinite(xyz).all():
         raise ValueError("points must be a finite array of shape (n_points, 3+)")
     vp = _check_viewpoint(viewpoint)
+    n_threads = effective_threads(n_jobs)
     if neighborhoods is None:
         neighborhoods = compute_neighborhoods(
-            xyz, n_neighbors=n_neighbors, radius=radius, n_jobs=n_jobs
+            xyz, n_neighbors=n_neighbors, radius=radius, n_jobs=n_threads
         )
     elif n_neighbors is not None or radius is not None:
         raise ValueError(
@@ -111,20 +113,20 @@ def estimate_normals(
             f"{len(xyz)}"
         )
     offsets = np.array([0, len(xyz)], dtype=np.int64)
-    return _normals_packed(xyz, offsets, neighborhoods, vp, n_jobs)
+    return _normals_packed(xyz, offsets, neighborhoods, vp, n_threads)
 
 
-def _normals_packed(xyz, offsets, neighborhoods, viewpoint, n_jobs):
+def _normals_packed(xyz, offsets, neighborhoods, viewpoint, n_threads):
     """Kernel call on packed float64 arrays (one or many clouds, global
     indices), each cloud in its local frame."""
     p, origins = local_frame(xyz, offsets)
     normals, curvature = _normals_f32(
-        p, neighborhoods, viewpoint - origins, n_jobs, offsets
+        p, neighborhoods, viewpoint - origins, n_threads, offsets
     )
     return normals.astype(np.float64), curvature.astype(np.float64)
 
 
-def _normals_f32(points, neighborhoods, viewpoint, n_jobs, cloud_ptr=None):
+def _normals_f32(points, neighborhoods, viewpoint, n_threads, cloud_ptr=None):
     """Normals and curvature, float32, of float32 packed points.
 
     ``points`` are in their clouds' local frames
@@ -132,8 +134,6 @@ def _normals_f32(points, neighborhoods, viewpoint, n_jobs, cloud_ptr=None):
     point (3,) for all, or one per cloud ``(n_clouds, 3)`` in the same
     frames, the clouds given by ``cloud_ptr`` (default: one cloud).
     """
-    from skpcd.preprocessing._normals_kernels import normals_rows
-
     n = len(points)
     if cloud_ptr is None:
         cloud_ptr = np.array([0, n], dtype=np.int64)
@@ -146,7 +146,7 @@ def _normals_f32(points, neighborhoods, viewpoint, n_jobs, cloud_ptr=None):
     parallel_rows(
         normals_rows,
         n,
-        n_jobs,
+        n_threads,
         points,
         neighborhoods.indptr,
         neighborhoods.indices,
@@ -252,24 +252,25 @@ class NormalEstimator(CloudTransformer):
             xyz, the normals (NaN where undefined, as in PCL), and the
             curvature if asked.
         """
-        clouds = check_point_clouds(X)
-        _check_viewpoint(self.viewpoint)
-        return map_batches(self._transform_batch, clouds, self.n_jobs)
+        return super().transform(X)
 
-    def _transform_batch(self, clouds, n_jobs):
+    def _transform_batch(self, clouds, n_threads):
         """:meth:`transform` of validated clouds (one batch of them)."""
         vp = _check_viewpoint(self.viewpoint)
         xyz, offsets, neighborhoods = pack_neighborhoods(
-            clouds, n_neighbors=self.n_neighbors, radius=self.radius, n_jobs=n_jobs
+            clouds,
+            n_neighbors=self.n_neighbors,
+            radius=self.radius,
+            n_threads=n_threads,
         )
-        normals, curvature = _normals_packed(xyz, offsets, neighborhoods, vp, n_jobs)
+        normals, curvature = _normals_packed(xyz, offsets, neighborhoods, vp, n_threads)
         cols = [xyz, normals] + ([curvature[:, None]] if self.include_curvature else [])
         out = np.hstack(cols)
         return [out[offsets[i] : offsets[i + 1]] for i in range(len(clouds))]
 
 
 def pack_neighborhoods(
-    clouds, *, n_neighbors=None, radius=None, n_jobs=None, with_sqdist=True
+    clouds, *, n_neighbors=None, radius=None, n_threads=1, with_sqdist=True
 ):
     """Stack clouds and their neighbourhoods into one set of packed arrays.
 
@@ -279,7 +280,7 @@ def pack_neighborhoods(
         Validated clouds.
     n_neighbors, radius : int or float
         The search; ``radius`` wins when both are set.
-    n_jobs : int, default=None
+    n_threads : int, default=1
         Threads for the searches.
     with_sqdist : bool, default=True
         False leaves the neighbourhoods' ``sqdist`` empty.
@@ -297,5 +298,7 @@ def pack_neighborhoods(
     np.cumsum([len(c) for c in clouds], out=offsets[1:])
     search = {"radius": radius} if radius is not None else {"n_neighbors": n_neighbors}
     xyz = np.ascontiguousarray(np.vstack([c[:, :3] for c in clouds]), dtype=np.float64)
-    nb = search_packed(xyz, offsets, n_jobs=n_jobs, with_sqdist=with_sqdist, **search)
+    nb = search_packed(
+        xyz, offsets, n_threads=n_threads, with_sqdist=with_sqdist, **search
+    )
     return xyz, offsets, nb

@@ -16,7 +16,8 @@ import math
 import numpy as np
 from numba import njit
 
-from skpcd.utils._numba import borrow
+from skpcd.preprocessing._grid_kernels import _ball
+from skpcd.utils._numba import borrow, keep
 
 F0 = np.float32(0.0)
 F05 = np.float32(0.5)
@@ -176,3 +177,37 @@ def _normal_row(points, indptr, indices, vpx, vpy, vpz, normals, curvature, r, i
     normals[i, 0] = nx
     normals[i, 1] = ny
     normals[i, 2] = nz
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _normal_sink(args, row, i, c, bi, bd, m):
+    """The normal of point ``i`` from its sorted ball ``bi[:m]``."""
+    points, viewpoints, normals, curvature, ends = args
+    bi[0] = i  # the point first, as a stored neighbourhood has it
+    ends[1] = m
+    vx, vy, vz = viewpoints[c, 0], viewpoints[c, 1], viewpoints[c, 2]
+    _normal_row(points, ends, bi, vx, vy, vz, normals, curvature, 0, i)
+
+
+@njit(cache=True, nogil=True)
+def ball_normals(
+    lo, hi, base, grid, r2, counts, points, viewpoints, normals, curvature
+):
+    """Radius neighbourhood sizes and normals of the points of cells ``lo``
+    to ``hi``, nothing else stored: each ball is searched on ``grid``
+    (:func:`~skpcd.preprocessing._grid_kernels.ball_cells_local`, rows by
+    sorted position minus ``base``), sorted, and its normal and curvature
+    estimated (:func:`normals_rows` on it). ``points`` are float32 in their
+    clouds' local frames, ``viewpoints`` one row per cloud in the same
+    frames."""
+    ends_own = np.zeros(2, dtype=np.int64)
+    args = (
+        borrow(points), borrow(viewpoints), borrow(normals), borrow(curvature),
+        borrow(ends_own),
+    )  # fmt: skip
+    none = np.empty(0, dtype=np.int64)
+    _ball(
+        lo, hi, grid, r2, none, counts, none[:0].astype(np.int32),
+        none[:0].astype(np.float32), base, True, _normal_sink, args, True,
+    )  # fmt: skip
+    keep(ends_own)

@@ -16,12 +16,13 @@ from sklearn.base import BaseEstimator, OutlierMixin, _fit_context
 from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import validate_data
 
+from skpcd.preprocessing._neighbors import compute_neighborhoods
+from skpcd.utils._validation import refuse_sequence
+
 __all__ = ["RadiusOutlierFilter", "StatisticalOutlierFilter"]
 
 
 def _xyz(estimator, X):
-    from skpcd.segmentation._clusters import refuse_sequence
-
     refuse_sequence(X)
     X = validate_data(estimator, X, dtype=np.float64)
     if X.shape[1] < 3:
@@ -147,8 +148,6 @@ class StatisticalOutlierFilter(_OutlierFilter):
         self : object
             The fitted filter.
         """
-        from skpcd.preprocessing._neighbors import compute_neighborhoods
-
         xyz = _xyz(self, X)
         n = len(xyz)
         if n == 1:
@@ -248,8 +247,6 @@ class RadiusOutlierFilter(_OutlierFilter):
         self : object
             The fitted filter.
         """
-        from skpcd.preprocessing._neighbors import compute_neighborhoods
-
         xyz = _xyz(self, X)
         nb = compute_neighborhoods(xyz, radius=float(self.radius), n_jobs=self.n_jobs)
         # the point itself is among its neighbours

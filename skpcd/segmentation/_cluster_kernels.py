@@ -29,24 +29,22 @@ def _find(parent, t):
 
 
 @njit(cache=True, nogil=True)
-def union_core(
-    lo, hi, xs, core, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2, parent
-):  # fmt: skip
+def union_core(lo, hi, grid, core, r2, parent):
     """Link the core points of cells ``lo`` to ``hi`` to the core points
     within ``sqrt(r2)`` (inclusive) in ``parent``, the lower root kept.
 
-    ``xs`` holds the points in sorted order and ``core`` their core flags
-    (sorted order too). A pair is tested from its lower position only.
+    ``grid.xs`` holds the points in sorted order and ``core`` their core
+    flags (sorted order too). A pair is tested from its lower position only.
     Threads each need a forest of their own (:func:`merge_forest` joins
     them): the links of a cell may reach any other cell's points.
     """
-    xs = borrow(xs)
+    xs = borrow(grid.xs)
     core = borrow(core)
-    cell_cloud = borrow(cell_cloud)
-    cell_key = borrow(cell_key)
-    cell_start = borrow(cell_start)
-    cloud_cells = borrow(cloud_cells)
-    dims = borrow(dims)
+    cell_cloud = borrow(grid.cell_cloud)
+    cell_key = borrow(grid.cell_key)
+    cell_start = borrow(grid.cell_start)
+    cloud_cells = borrow(grid.cloud_cells)
+    dims = borrow(grid.dims)
     parent = borrow(parent)
     i_own = np.empty(27, dtype=np.int64)
     cur = borrow(i_own[:9])
@@ -92,21 +90,18 @@ def merge_forest(parent, other):
 
 
 @njit(cache=True, nogil=True)
-def attach_border(
-    lo, hi, xs, order, core, cell_cloud, cell_key, cell_start, cloud_cells, dims, r2,
-    nearest,
-):  # fmt: skip
+def attach_border(lo, hi, grid, core, r2, nearest):
     """For every non-core point of cells ``lo`` to ``hi``, the position of
     its nearest core point within ``sqrt(r2)`` into ``nearest`` (ties by the
     lower point index), or -1. Rows are independent: safe in threads."""
-    xs = borrow(xs)
-    order = borrow(order)
+    xs = borrow(grid.xs)
+    order = borrow(grid.order)
     core = borrow(core)
-    cell_cloud = borrow(cell_cloud)
-    cell_key = borrow(cell_key)
-    cell_start = borrow(cell_start)
-    cloud_cells = borrow(cloud_cells)
-    dims = borrow(dims)
+    cell_cloud = borrow(grid.cell_cloud)
+    cell_key = borrow(grid.cell_key)
+    cell_start = borrow(grid.cell_start)
+    cloud_cells = borrow(grid.cloud_cells)
+    dims = borrow(grid.dims)
     nearest = borrow(nearest)
     i_own = np.empty(27, dtype=np.int64)
     cur = borrow(i_own[:9])

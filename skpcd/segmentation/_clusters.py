@@ -19,27 +19,27 @@ from numbers import Integral, Real
 
 import numpy as np
 from sklearn.base import BaseEstimator, ClusterMixin, _fit_context
+from sklearn.utils import check_array
 from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import validate_data
 
+from skpcd.preprocessing._grid import ball_counts, radius_grid
+from skpcd.segmentation import _cluster_kernels as k
 from skpcd.utils._parallel import effective_threads, parallel_rows
+from skpcd.utils._validation import refuse_sequence
 
-__all__ = ["EuclideanClusters", "euclidean_clusters", "grid_dbscan"]
+__all__ = [
+    "EUCLIDEAN_EPS",
+    "EuclideanClusters",
+    "euclidean_clusters",
+    "grid_dbscan",
+]
 
+# The default distance of the Euclidean clusters (metres), from the urban
+# LiDAR study this library follows; also the tiled segmentation's.
+EUCLIDEAN_EPS = 0.2
 # Fewer points than this per thread: the union-find runs in one thread.
 _MIN_UNION_POINTS = 50_000
-
-
-def refuse_sequence(X):
-    """A list of clouds given where one cloud is expected: a clear error."""
-    if (
-        isinstance(X, (list, tuple))
-        or (isinstance(X, np.ndarray) and X.dtype == object)
-    ) and any(np.ndim(c) == 2 for c in X):
-        raise ValueError(
-            "X must be one point cloud, an array of shape (n_points, 3+); got a "
-            "sequence of clouds: segment each cloud on its own."
-        )
 
 
 def check_scene(X, estimator=None, *, min_points=1, reset=True):
@@ -53,8 +53,6 @@ def check_scene(X, estimator=None, *, min_points=1, reset=True):
     kwargs = {"dtype": np.float64, "ensure_min_samples": min_points}
     refuse_sequence(X)
     if estimator is None:
-        from sklearn.utils import check_array
-
         X = check_array(X, input_name="X", **kwargs)
     else:
         X = validate_data(estimator, X, reset=reset, **kwargs)
@@ -69,32 +67,18 @@ def check_scene(X, estimator=None, *, min_points=1, reset=True):
     return np.ascontiguousarray(X[:, :3])
 
 
-def _radius_grid(xyz, eps):
-    """The radius-search grid of :mod:`skpcd.preprocessing._neighbors` for
-    one cloud: ``(xs, order, cells, dims)``, ``xs`` the points in cell order."""
-    from skpcd.preprocessing._neighbors import build_grid, grid_shape
-
-    cloud_ptr = np.array([0, len(xyz)], dtype=np.int64)
-    origin, h, dims = grid_shape(xyz, cloud_ptr, np.array([float(eps)]))
-    order, cells = build_grid(xyz, cloud_ptr, origin, h, dims)
-    return xyz[order], order, cells, dims
-
-
-def _union(xs, core, cells, cell_args, r2, n_jobs):
+def _union(grid, core, r2, n_threads):
     """The union-find forest of the core points within ``sqrt(r2)``: each
     thread links the core points of a share of the cells (by point count)
     in a forest of its own, and the forests are merged. Roots are the lowest
     positions of their components, whatever the threads."""
-    from skpcd.segmentation import _cluster_kernels as k
-
-    n, n_cells = len(xs), len(cells[1])
+    n, n_cells = len(grid.order), grid.n_cells
     dtype = np.int32 if n < 2**31 - 1 else np.int64
-    n_threads = min(effective_threads(n_jobs), max(1, n // _MIN_UNION_POINTS))
-    cell_start = cells[2]
-    bounds = np.searchsorted(cell_start, np.linspace(0, n, n_threads + 1)[1:-1])
+    n_threads = min(n_threads, max(1, n // _MIN_UNION_POINTS))
+    bounds = np.searchsorted(grid.cell_start, np.linspace(0, n, n_threads + 1)[1:-1])
     bounds = [0, *bounds.tolist(), n_cells]
     forests = [np.arange(n, dtype=dtype) for _ in range(n_threads)]
-    args = (xs, core, *cell_args, r2)
+    args = (grid, core, r2)
     if n_threads == 1:
         k.union_core(0, n_cells, *args, forests[0])
         return forests[0]
@@ -124,7 +108,8 @@ def grid_dbscan(xyz, eps, min_samples, *, n_jobs=None):
         Points within ``eps`` (the point itself included) that make a core
         point. 1 makes every point core: Euclidean clusters.
     n_jobs : int, default=None
-        Threads for counting neighbours and attaching border points.
+        Threads for counting neighbours and attaching border points
+        (resolved here, :func:`~skpcd.utils._parallel.effective_threads`).
 
     Returns
     -------
@@ -142,9 +127,6 @@ def grid_dbscan(xyz, eps, min_samples, *, n_jobs=None):
     scikit-learn's, where a border point shared by two clusters goes to the
     one expanded first. Core points and their clusters are the same.
     """
-    from skpcd.preprocessing import _grid_kernels as g
-    from skpcd.segmentation import _cluster_kernels as k
-
     xyz = np.ascontiguousarray(xyz, dtype=np.float64)
     if xyz.ndim != 2 or xyz.shape[1] != 3:
         raise ValueError(
@@ -155,32 +137,24 @@ def grid_dbscan(xyz, eps, min_samples, *, n_jobs=None):
     n = len(xyz)
     if n == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.bool_)
+    n_threads = effective_threads(n_jobs)
     r2 = float(eps) ** 2
-    xs, order, cells, dims = _radius_grid(xyz, eps)
-    cell_args = (*cells, dims)
-    n_cells = len(cells[1])
+    grid = radius_grid(xyz, np.array([0, n], dtype=np.int64), eps)
     if min_samples <= 1:
         core_sorted = np.ones(n, dtype=np.bool_)
     else:
-        counts = np.empty(n, dtype=np.int64)
-        none_i, none_f = np.empty(0, np.int32), np.empty(0, np.float32)
-        parallel_rows(
-            g.ball_cells, n_cells, n_jobs, xs, order, *cell_args, r2,
-            np.empty(0, np.int64), counts, none_i, none_f,
-        )  # fmt: skip
-        core_sorted = counts[order] >= min_samples
+        counts = ball_counts(grid, eps, n_threads)
+        core_sorted = counts[grid.order] >= min_samples
         del counts
-    parent = _union(xs, core_sorted, cells, cell_args, r2, n_jobs)
+    parent = _union(grid, core_sorted, r2, n_threads)
     nearest = np.full(n, -1, dtype=np.int64)
     if not core_sorted.all():
-        parallel_rows(
-            k.attach_border, n_cells, n_jobs, xs, order, core_sorted, *cell_args,
-            r2, nearest,
-        )  # fmt: skip
+        args = (grid, core_sorted, r2, nearest)
+        parallel_rows(k.attach_border, grid.n_cells, n_threads, *args)
     labels = np.empty(n, dtype=np.int64)
-    k.component_labels(parent, core_sorted, nearest, order, labels)
+    k.component_labels(parent, core_sorted, nearest, grid.order, labels)
     core = np.empty(n, dtype=np.bool_)
-    core[order] = core_sorted
+    core[grid.order] = core_sorted
     return labels, core
 
 
@@ -215,7 +189,12 @@ def filter_cluster_sizes(labels, min_size=1, max_size=None):
 
 
 def euclidean_clusters(
-    points, *, eps=0.2, min_cluster_size=500, max_cluster_size=None, n_jobs=None
+    points,
+    *,
+    eps=EUCLIDEAN_EPS,
+    min_cluster_size=500,
+    max_cluster_size=None,
+    n_jobs=None,
 ):
     """Connected components of the points closer than a distance.
 
@@ -333,7 +312,12 @@ class EuclideanClusters(ClusterMixin, BaseEstimator):
     }
 
     def __init__(
-        self, *, eps=0.2, min_cluster_size=500, max_cluster_size=None, n_jobs=None
+        self,
+        *,
+        eps=EUCLIDEAN_EPS,
+        min_cluster_size=500,
+        max_cluster_size=None,
+        n_jobs=None,
     ):
         self.eps = eps
         self.min_cluster_size = min_cluster_size

@@ -36,16 +36,25 @@ _KNEE_GRID = 1000
 EPS_SCALE = 2.5
 
 
+def sample_queries(n, max_samples, random_state):
+    """The points whose k-distance curve is averaged: ``max_samples`` of the
+    ``n`` drawn without replacement, sorted (all of them when there are no
+    more). The one place of this draw, for :class:`AutoEpsDBSCAN` and the
+    tiled estimate of :func:`~skpcd.segmentation.segment_scene` (which
+    draws the same sample, so finds the same eps)."""
+    if max_samples is not None and n > max_samples:
+        rng = check_random_state(random_state)
+        return np.sort(rng.choice(n, int(max_samples), replace=False))
+    return np.arange(n)
+
+
 def _kdist_curve(xyz, n_neighbors, max_samples, random_state, n_jobs):
     """Mean k-th nearest-neighbour distance for k = 1..K over (a sample of)
     the points; neighbours among all points. Returns ``(k, mean)``."""
     n = len(xyz)
     k_max = min(int(n_neighbors), n - 1)
-    if max_samples is not None and n > max_samples:
-        rng = check_random_state(random_state)
-        queries = xyz[np.sort(rng.choice(n, int(max_samples), replace=False))]
-    else:
-        queries = xyz
+    rows = sample_queries(n, max_samples, random_state)
+    queries = xyz if len(rows) == n else xyz[rows]
     tree = cKDTree(xyz, balanced_tree=False, compact_nodes=False)
     dist, _ = tree.query(queries, k=k_max + 1, workers=effective_threads(n_jobs))
     # column 0 is the point itself (or a duplicate of it: distance 0 either way)

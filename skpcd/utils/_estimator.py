@@ -1,7 +1,28 @@
-"""The base class of the transformers that take a list of clouds and learn nothing."""
+"""The base class of the transformers that take a list of clouds and learn nothing.
+
+:class:`CloudTransformer` holds what every such transformer does the same
+way: ``fit`` validates and records ``n_features_in_``, ``transform`` is a
+template (validate the clouds, then :func:`~skpcd.utils._parallel.map_batches`
+of the subclass's ``_transform_batch``), ``fit_transform`` validates once.
+imbalanced-learn's ``SamplerMixin.fit_resample`` -> ``_fit_resample`` is the
+model. A subclass writes two methods:
+
+- ``_validate(X)``: the clouds, checked (extend the default,
+  :func:`~skpcd.utils.check_point_clouds`, with the subclass's own checks);
+- ``_transform_batch(clouds, n_threads)``: the output of a batch of
+  validated clouds, its kernels on ``n_threads`` threads (an int: ``n_jobs``
+  is resolved once, by ``map_batches``). A list (one entry per cloud), an
+  array (one row per cloud) or a tuple of those.
+
+A subclass may override ``transform`` for its docstring only (``return
+super().transform(X)``). One that writes its own ``transform`` instead of
+``_transform_batch`` (calling ``map_batches`` itself, as before this
+template) still works: ``fit_transform`` then calls that ``transform``.
+"""
 
 from sklearn.base import BaseEstimator, TransformerMixin, _fit_context
 
+from skpcd.utils._parallel import map_batches
 from skpcd.utils._validation import check_point_clouds
 
 __all__ = ["CloudTransformer"]
@@ -12,12 +33,23 @@ class CloudTransformer(TransformerMixin, BaseEstimator):
 
     :meth:`fit` validates the parameters and the clouds (through
     :meth:`_validate`, which subclasses may extend) and records
-    ``n_features_in_``; the tags say that X is not a 2-D array and that
-    :meth:`transform` needs no fit.
+    ``n_features_in_``; :meth:`transform` validates the clouds and maps
+    ``_transform_batch`` over batches of them; the tags say that X is not
+    a 2-D array and that :meth:`transform` needs no fit.
     """
+
+    # pooled outputs are much smaller than their temporaries: run the
+    # batches one after the other also in-process (bounded memory)
+    _bounded_batches = False
 
     def _validate(self, X):
         return check_point_clouds(X)
+
+    def _fit_clouds(self, X):
+        """What :meth:`fit` checks and sets; returns the validated clouds."""
+        clouds = self._validate(X)
+        self.n_features_in_ = clouds[0].shape[1] if clouds else 3
+        return clouds
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, X, y=None):
@@ -35,9 +67,58 @@ class CloudTransformer(TransformerMixin, BaseEstimator):
         self : object
             The transformer.
         """
-        clouds = self._validate(X)
-        self.n_features_in_ = clouds[0].shape[1] if clouds else 3
+        self._fit_clouds(X)
         return self
+
+    @_fit_context(prefer_skip_nested_validation=True)
+    def fit_transform(self, X, y=None):
+        """Fit and transform, checking the clouds once.
+
+        Parameters
+        ----------
+        X : sequence of ndarray of shape (n_points_i, 3+)
+            The clouds.
+        y : None
+            Ignored.
+
+        Returns
+        -------
+        Xt : list of ndarray or ndarray
+            As :meth:`transform`.
+        """
+        clouds = self._fit_clouds(X)
+        if type(self)._transform_batch is CloudTransformer._transform_batch:
+            return self.transform(X)  # a subclass with its own transform
+        return self._map_batches(clouds)
+
+    def transform(self, X):
+        """Transform every cloud.
+
+        Parameters
+        ----------
+        X : sequence of ndarray of shape (n_points_i, 3+)
+            The clouds.
+
+        Returns
+        -------
+        Xt : list of ndarray or ndarray
+            One array per cloud, or one row per cloud.
+        """
+        return self._map_batches(self._validate(X))
+
+    def _map_batches(self, clouds):
+        """``_transform_batch`` over batches of validated clouds."""
+        return map_batches(
+            self._transform_batch,
+            clouds,
+            getattr(self, "n_jobs", None),
+            bounded=self._bounded_batches,
+        )
+
+    def _transform_batch(self, clouds, n_threads):
+        raise NotImplementedError(
+            f"{type(self).__name__} must define _transform_batch (or transform)"
+        )
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()

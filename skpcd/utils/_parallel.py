@@ -3,8 +3,21 @@
 Kernels are serial ``nogil`` numba functions over a range of rows,
 ``kernel(lo, hi, *args)``, writing into arrays allocated by the caller;
 :func:`parallel_rows` cuts the rows into chunks and runs them on a pool of
-Python threads. Compared with numba's ``parallel=True``, this compiles
-several times faster, needs no threading layer, and the thread count is an
+Python threads.
+
+``n_jobs`` becomes a thread count in one place, :func:`effective_threads`,
+called at the boundary: by :func:`map_batches` for the estimators (which
+hand each batch function its thread count) and by the public function
+forms (``compute_neighborhoods``, ``compute_pfh``, ``grid_dbscan``...).
+Below the boundary every function takes ``n_threads``, a positive int
+(:func:`parallel_rows` refuses anything else), and nothing looks at
+``n_jobs`` again. The thread-local state of a dispatched batch is read only
+by :func:`effective_threads` itself, so that an estimator called inside a
+batch (a pipeline step in a dispatched task) gets the batch's share of the
+cores, not its own ``n_jobs``.
+
+Compared with numba's ``parallel=True``, these threads compile several
+times faster, need no threading layer, and the thread count is an
 argument, not global state.
 
 :func:`map_batches` is the one place where work on a list of clouds is
@@ -20,6 +33,9 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
+from joblib import cpu_count, effective_n_jobs
+from joblib.parallel import LokyBackend, SequentialBackend, get_active_backend
+from sklearn.utils.parallel import Parallel, delayed
 
 __all__ = [
     "BATCH_POINTS",
@@ -28,7 +44,6 @@ __all__ = [
     "effective_threads",
     "map_batches",
     "parallel_rows",
-    "release_free_memory",
     "task_threads",
 ]
 
@@ -69,8 +84,6 @@ def effective_threads(n_jobs):
     task = getattr(_TASK, "n_threads", None)
     if task is not None:
         return task
-    from joblib import effective_n_jobs
-
     return max(1, int(effective_n_jobs(n_jobs)))
 
 
@@ -86,7 +99,7 @@ def task_threads():
     return getattr(_TASK, "n_threads", None)
 
 
-def parallel_rows(kernel, n_rows, n_jobs, *args, min_chunk=_MIN_CHUNK):
+def parallel_rows(kernel, n_rows, n_threads, *args, min_chunk=_MIN_CHUNK):
     """Run ``kernel(lo, hi, *args)`` over ``range(n_rows)`` in chunks.
 
     Parameters
@@ -97,14 +110,20 @@ def parallel_rows(kernel, n_rows, n_jobs, *args, min_chunk=_MIN_CHUNK):
         arrays among ``args``, rows ``lo`` to ``hi`` only.
     n_rows : int
         Number of rows.
-    n_jobs : int or None
-        Threads, as in scikit-learn.
+    n_threads : int
+        Threads, at least 1 (:func:`effective_threads` of the estimator's
+        ``n_jobs``, resolved at the boundary).
     *args
         Passed to the kernel.
     min_chunk : int, default=4096
         Fewest rows per chunk (lower for expensive rows).
     """
-    n_threads = effective_threads(n_jobs)
+    if isinstance(n_threads, bool) or not isinstance(n_threads, (int, np.integer)):
+        raise TypeError(
+            "parallel_rows takes a thread count: resolve n_jobs with "
+            f"effective_threads at the boundary, got {n_threads!r}"
+        )
+    n_threads = max(1, int(n_threads))
     if n_threads == 1 or n_rows <= min_chunk:
         kernel(0, n_rows, *args)
         return
@@ -220,8 +239,6 @@ def _chosen_backend():
     """
     if getattr(_TASK, "n_threads", None) is not None:
         return None
-    from joblib.parallel import LokyBackend, SequentialBackend, get_active_backend
-
     backend, _ = get_active_backend()
     if isinstance(backend, (LokyBackend, SequentialBackend)):
         return None
@@ -250,8 +267,6 @@ def _task_threads(n_threads, hosts):
     worker the cores of its machine shared by all worker threads there."""
     if hosts is None:
         return n_threads
-    from joblib import cpu_count
-
     try:
         from distributed import get_worker
         from distributed.comm import get_address_host
@@ -291,13 +306,12 @@ def _concat(parts):
 def map_batches(
     func, items, n_jobs=None, *, sizes=None, batch_points=None, bounded=False
 ):
-    """``func(items, n_jobs)``, in batches of items on a joblib backend.
+    """``func(items, n_threads)``, in batches of items on a joblib backend.
 
     Outside a :func:`joblib.parallel_config` context that chooses a
     backend (and with joblib's default backend, loky, even when chosen:
-    see ``_chosen_backend``), this is ``func(items, n_jobs)``: one call,
-    in-process, whose kernels run on ``n_jobs`` threads
-    (:func:`effective_threads`). Inside one (``backend="dask"`` with a
+    see ``_chosen_backend``), this is ``func(items, effective_threads(n_jobs))``:
+    one call, in-process. Inside one (``backend="dask"`` with a
     ``dask.distributed.Client``, ``"threading"``, ``"multiprocessing"``,
     any registered backend), the items are cut into contiguous
     batches of whole items (:func:`batch_bounds`) dispatched with
@@ -327,7 +341,8 @@ def map_batches(
     Parameters
     ----------
     func : callable
-        ``func(batch, n_jobs)``, ``batch`` a slice of ``items``, returns a
+        ``func(batch, n_threads)``, ``batch`` a slice of ``items`` and
+        ``n_threads`` the threads for its kernels (an int), returns a
         list (one entry per item), an array (rows in item order) or a
         tuple of those. Pickled with the batch for process backends.
     items : sequence
@@ -350,7 +365,7 @@ def map_batches(
     Returns
     -------
     result : list, ndarray or tuple
-        What ``func(items, n_jobs)`` returns.
+        What ``func(items, n_threads)`` returns.
 
     Examples
     --------
@@ -358,7 +373,7 @@ def map_batches(
     >>> import numpy as np
     >>> from skpcd.utils._parallel import map_batches
     >>> clouds = [np.zeros((n, 3)) for n in (2, 3, 4)]
-    >>> def sizes(batch, n_jobs):
+    >>> def sizes(batch, n_threads):
     ...     return [len(c) for c in batch]
     >>> with joblib.parallel_config(backend="threading", n_jobs=2):
     ...     map_batches(sizes, clouds, batch_points=5)
@@ -366,10 +381,7 @@ def map_batches(
     """
     backend = _chosen_backend() if len(items) else None
     if backend is None and not (bounded and len(items) > 1):
-        return func(items, n_jobs)
-    from joblib import cpu_count, effective_n_jobs
-    from sklearn.utils.parallel import Parallel, delayed
-
+        return func(items, effective_threads(n_jobs))
     if sizes is None:
         sizes = [len(x) for x in items]
     sizes = np.asarray(sizes, dtype=np.int64)
@@ -382,7 +394,8 @@ def map_batches(
         batch_points = _BATCH_POINTS.get() or BATCH_POINTS
     if backend is None:  # bounded, in-process: one batch after the other
         bounds = batch_bounds(sizes, int(batch_points))
-        return _concat([func(items[lo:hi], n_jobs) for lo, hi in bounds])
+        n_threads = effective_threads(n_jobs)
+        return _concat([func(items[lo:hi], n_threads) for lo, hi in bounds])
     n_tasks = max(1, int(effective_n_jobs(n_jobs)))
     # every task gets work: at most the total divided by the tasks
     even = -(-int(sizes.sum()) // n_tasks)
@@ -394,27 +407,3 @@ def map_batches(
         delayed(_run_batch)(func, items[lo:hi], n_threads, hosts) for lo, hi in bounds
     )
     return _concat(Parallel(n_jobs=n_jobs, batch_size=1)(tasks))
-
-
-_LIBC = []
-
-
-def release_free_memory():
-    """Give the memory that the C heap holds free back to the system.
-
-    glibc keeps freed blocks below its (self-raising) mmap threshold in the
-    heap, so the large temporaries of a search (tens of MB) stay in the
-    resident set after they are freed; ``malloc_trim`` returns their pages
-    before the kernels allocate their outputs, which lowers the peak. A
-    no-op where the C library is not glibc.
-    """
-    if not _LIBC:
-        try:
-            import ctypes
-
-            libc = ctypes.CDLL("libc.so.6")
-            _LIBC.append(libc.malloc_trim)
-        except (OSError, AttributeError):
-            _LIBC.append(None)
-    if _LIBC[0] is not None:
-        _LIBC[0](0)

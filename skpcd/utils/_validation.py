@@ -384,3 +384,15 @@ def _check_given_normals(clouds, normals, *, estimation=(), input_name="X"):
             )
         given.append(has)
     return given
+
+
+def refuse_sequence(X):
+    """A list of clouds given where one cloud is expected: a clear error."""
+    if (
+        isinstance(X, (list, tuple))
+        or (isinstance(X, np.ndarray) and X.dtype == object)
+    ) and any(np.ndim(c) == 2 for c in X):
+        raise ValueError(
+            "X must be one point cloud, an array of shape (n_points, 3+); got a "
+            "sequence of clouds: segment each cloud on its own."
+        )

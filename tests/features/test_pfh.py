@@ -356,10 +356,10 @@ def test_simd_kernels_equal_the_scalar_pair_path():
                 pfh_rows_reuse(0, len(pts), rows, none, pos, *sorted_nb, *args)
                 assert (pos == -1).all()
                 np.testing.assert_array_equal(reused, ref)
-            got_counts, table = _spfh_counts(pts, normals, nb, n_bins, None)
+            got_counts, table = _spfh_counts(pts, normals, nb, n_bins, 1)
             np.testing.assert_array_equal(got_counts, counts)
             # 4-bit counts, two per byte, where no point has more than 15 pairs
-            packed, _ = _spfh_counts(pts, normals, nb, n_bins, None, pack=True)
+            packed, _ = _spfh_counts(pts, normals, nb, n_bins, 1, pack=True)
             if nb.sizes.max() - 1 > 15:
                 assert packed.shape == counts.shape
                 continue
@@ -368,7 +368,7 @@ def test_simd_kernels_equal_the_scalar_pair_path():
             unpacked = unpacked.reshape(len(pts), -1)[:, : 3 * n_bins]
             np.testing.assert_array_equal(unpacked, counts)
             for convention in ("pcl", "open3d", "paper"):
-                args = (table, nb, n_bins, convention, None)
+                args = (table, nb, n_bins, convention, 1)
                 np.testing.assert_array_equal(
                     _fpfh_from_counts(pts, packed, *args),
                     _fpfh_from_counts(pts, got_counts, *args),

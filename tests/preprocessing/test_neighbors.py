@@ -136,7 +136,7 @@ def test_grid_equals_kd_tree_on_real_objects(dales):
     from skpcd.preprocessing._neighbors import search_packed
     from skpcd.preprocessing._normals import pack_neighborhoods
 
-    xyz, ptr, grid = pack_neighborhoods(clouds, n_neighbors=10, n_jobs=2)
+    xyz, ptr, grid = pack_neighborhoods(clouds, n_neighbors=10, n_threads=2)
     tree = search_packed(xyz, ptr, n_neighbors=10, algorithm="kd_tree")
     _assert_same(grid, tree, ties_ok=True)
     # ties aside, the neighbour sets agree: same distances row by row

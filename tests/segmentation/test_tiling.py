@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from skpcd.segmentation import make_scene, segment_scene
-from skpcd.segmentation._tiling import TileGrid, tile_scene
+from skpcd.segmentation._spill import tile_scene
+from skpcd.segmentation._tile_geometry import TileGrid
 
 TILE = 25.0
 
@@ -172,15 +173,15 @@ def test_tiled_on_a_backend_that_cannot_read_the_tile_files(
     # "shipped": a backend on other machines (the driver reads and ships the
     # tiles); "unseen": the tasks cannot read the files although the backend
     # said they could (the driver computes those tiles, then ships)
-    import skpcd.segmentation._tiling as tiling
+    import skpcd.segmentation._tile_dispatch as dispatch
 
     points, _ = scene
     calls = []
     if where == "shipped":
-        monkeypatch.setattr(tiling, "_shares_files", lambda backend: False)
-        monkeypatch.setattr(tiling, "_read_ref", lambda ref: calls.append(ref))
+        monkeypatch.setattr(dispatch, "shares_files", lambda backend: False)
+        monkeypatch.setattr(dispatch, "_read_ref", lambda ref: calls.append(ref))
     else:
-        monkeypatch.setattr(tiling, "_read_ref", lambda ref: calls.append(ref))
+        monkeypatch.setattr(dispatch, "_read_ref", lambda ref: calls.append(ref))
     with joblib.parallel_config(backend="threading", n_jobs=2):
         tiled = segment_scene(points, tile_size=TILE)
     b = segment_scene(points)
@@ -199,15 +200,15 @@ class DaskDistributedBackend:  # the name joblib's Dask backend has
 def test_tasks_read_the_tile_files_only_on_this_machine():
     from joblib._parallel_backends import LokyBackend, ThreadingBackend
 
-    from skpcd.segmentation._tiling import _shares_files
+    from skpcd.segmentation._tile_dispatch import shares_files
 
-    assert _shares_files(ThreadingBackend()) and _shares_files(LokyBackend())
+    assert shares_files(ThreadingBackend()) and shares_files(LokyBackend())
     here = {"tcp://127.0.0.1:40001": 1, "tcp://127.0.0.1:40002": 2}
-    assert _shares_files(DaskDistributedBackend(here))
+    assert shares_files(DaskDistributedBackend(here))
     there = {**here, "tcp://192.0.2.7:40003": 1}  # TEST-NET-1, not this machine
-    assert not _shares_files(DaskDistributedBackend(there))
-    assert not _shares_files(DaskDistributedBackend({}))
-    assert not _shares_files(object())
+    assert not shares_files(DaskDistributedBackend(there))
+    assert not shares_files(DaskDistributedBackend({}))
+    assert not shares_files(object())
 
 
 def test_buffer_too_small_for_eps(scene):

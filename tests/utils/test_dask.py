@@ -101,11 +101,12 @@ def test_local_path_is_one_call():
     calls = []
     assert map_batches(_record(calls), clouds, 3, batch_points=1) == [5, 6, 7]
     assert len(calls) == 1 and calls[0][1] == 3
-    # n_jobs without a backend: still local, threads as before
+    # n_jobs without a backend: still local, threads as before; the batch
+    # function gets the thread count, resolved once by map_batches
     calls.clear()
     with joblib.parallel_config(n_jobs=2):
         map_batches(_record(calls), clouds, None, batch_points=1)
-    assert len(calls) == 1 and calls[0][1] is None and calls[0][2] == 2
+    assert len(calls) == 1 and calls[0][1] == 2 and calls[0][2] == 2
     calls.clear()
     # the sequential backend runs in-process too
     with joblib.parallel_config(backend="sequential"):
@@ -384,3 +385,16 @@ def test_dask_cluster_is_bit_identical(dask_client, workloads, name):
         # each batch ran as a task on one of the cluster's workers, not here
         assert len(workers) == n_batches, (name, per_worker, workers)
         assert set(workers) <= cluster_workers
+
+
+def test_parallel_rows_takes_a_thread_count():
+    # n_jobs is resolved at the boundary (map_batches, the function forms);
+    # the row runner refuses an unresolved one
+    from skpcd.utils._parallel import parallel_rows
+
+    out = []
+    parallel_rows(lambda lo, hi: out.append((lo, hi)), 3, 1)
+    assert out == [(0, 3)]
+    for bad in (None, -1.0, True):
+        with pytest.raises(TypeError, match="thread count"):
+            parallel_rows(lambda lo, hi: None, 3, bad)

@@ -1,0 +1,235 @@
+"""The sorted voxel grid: one type and the entry points other packages call.
+
+The neighbour search (:mod:`skpcd.preprocessing._neighbors`), the grid
+DBSCAN (:mod:`skpcd.segmentation._clusters`) and the blocked radius PFH
+(:mod:`skpcd.features._pfh`) all bucket packed clouds into cubic cells and
+sort the points by (cloud, cell key); the kernels that walk the grid are in
+:mod:`skpcd.preprocessing._grid_kernels`. Outside ``preprocessing`` the
+grid is a :class:`VoxelGrid`, built by :func:`radius_grid` (or
+:func:`build_grid`) and searched through :func:`ball_counts`,
+:func:`ball_lists`, :func:`ball_block` and :func:`ball_block_normals`;
+the k-nearest search (:func:`~skpcd.preprocessing._neighbors.search_packed`)
+passes it to its own kernel. Nobody outside indexes tuples of cell arrays
+or passes empty arrays as switches.
+"""
+
+import typing
+
+import numpy as np
+
+from skpcd.preprocessing import _grid_kernels as g
+from skpcd.preprocessing._normals_kernels import ball_normals
+from skpcd.utils._parallel import parallel_rows
+from skpcd.utils._validation import cloud_bounds
+
+__all__ = [
+    "VoxelGrid",
+    "ball_block",
+    "ball_block_normals",
+    "ball_counts",
+    "ball_lists",
+    "build_grid",
+    "grid_shape",
+    "radius_grid",
+    "sort_points",
+]
+
+
+class VoxelGrid(typing.NamedTuple):
+    """Packed clouds bucketed into cubic cells, points sorted by (cloud, key).
+
+    A NamedTuple of arrays: numba kernels take it as one argument.
+
+    Attributes
+    ----------
+    xs : ndarray of shape (n_points, 3), float64
+        The points in sorted order (``xyz[order]``).
+    order : ndarray of shape (n_points,), int64
+        Point index at each sorted position.
+    cell_cloud, cell_key : ndarray of shape (n_cells,), int64
+        Each occupied cell's cloud and key ``(x * ny + y) * nz + z``.
+    cell_start : ndarray of shape (n_cells + 1,), int64
+        Sorted position of each cell's first point.
+    cloud_cells : ndarray of shape (n_clouds + 1,), int64
+        First cell of each cloud.
+    origin : ndarray of shape (n_clouds, 3), float64
+        Each cloud's minimum corner.
+    h : ndarray of shape (n_clouds,), float64
+        Each cloud's cell size.
+    dims : ndarray of shape (n_clouds, 3), int64
+        Cells per axis of each cloud's grid.
+    """
+
+    xs: np.ndarray
+    order: np.ndarray
+    cell_cloud: np.ndarray
+    cell_key: np.ndarray
+    cell_start: np.ndarray
+    cloud_cells: np.ndarray
+    origin: np.ndarray
+    h: np.ndarray
+    dims: np.ndarray
+
+    @property
+    def n_cells(self):
+        """Number of occupied cells."""
+        return len(self.cell_key)
+
+    def cells_per_cloud(self):
+        """Occupied cells of each cloud."""
+        return np.diff(self.cloud_cells)
+
+
+def grid_shape(xyz, cloud_ptr, h, lo_hi=None):
+    """Origins, cell sizes (at least ``h``, above the radius) and grid shapes.
+
+    Returns ``origin (n_clouds, 3), h (n_clouds,), dims (n_clouds, 3)``.
+    """
+    lo, hi = cloud_bounds(xyz, cloud_ptr) if lo_hi is None else lo_hi
+    extent = hi - lo
+    # cells a hair wider than asked: a radius query's 27 cells cover the ball
+    # whatever the rounding of cell coordinates
+    h = np.maximum(h * (1 + 1e-9), extent.max(axis=1) / (g.MAX_DIM - 2))
+    h = np.where(h > 0, h, 1.0)
+    dims = (np.floor(extent / h[:, None]) + 1).astype(np.int64)
+    return lo, h, dims
+
+
+def sort_points(xyz, cloud_ptr, origin, h, dims):
+    """Points sorted by (cloud, cell key), and the cells.
+
+    Returns ``order`` (point indices in that order) and the tuple
+    ``(cell_cloud, cell_key, cell_start, cloud_cells)`` of
+    :func:`~skpcd.preprocessing._grid_kernels.sorted_cells`.
+    """
+    sizes = np.diff(cloud_ptr)
+    keys = np.empty(len(xyz), dtype=np.int64)
+    g.cell_keys(xyz, cloud_ptr, origin, h, dims, keys)
+    n_keys = np.prod(dims.astype(np.float64), axis=1)
+    if n_keys.sum() < 2.0**62:
+        # one sort: cloud c's keys shifted past the keys of the clouds before;
+        # a radix sort, a few passes of 11 bits (3x faster than np.argsort)
+        base = np.concatenate([[0], np.cumsum(np.prod(dims, axis=1))[:-1]])
+        g.shift_keys(keys, cloud_ptr, base, 1)
+        order, keys = g.radix_argsort(keys)
+        g.shift_keys(keys, cloud_ptr, base, -1)
+        return order, g.sorted_cells(keys, cloud_ptr)
+    cloud = np.repeat(np.arange(len(sizes)), sizes)
+    order = np.lexsort((keys, cloud))
+    return order, g.sorted_cells(keys[order], cloud_ptr)
+
+
+def build_grid(xyz, cloud_ptr, h, lo_hi=None):
+    """The grid of cells at least ``h[c]`` wide over each cloud ``c``.
+
+    Parameters
+    ----------
+    xyz : ndarray of shape (n_points, 3), float64, C-contiguous
+        The packed clouds.
+    cloud_ptr : ndarray of shape (n_clouds + 1,), int64
+        Offsets of the clouds.
+    h : ndarray of shape (n_clouds,)
+        Smallest cell size of each cloud.
+    lo_hi : tuple of ndarray, default=None
+        The clouds' bounds (:func:`~skpcd.utils._validation.cloud_bounds`),
+        if already known.
+
+    Returns
+    -------
+    grid : VoxelGrid
+    """
+    origin, h, dims = grid_shape(xyz, cloud_ptr, h, lo_hi)
+    order, cells = sort_points(xyz, cloud_ptr, origin, h, dims)
+    return VoxelGrid(g.gather_rows(xyz, order), order, *cells, origin, h, dims)
+
+
+def radius_grid(xyz, cloud_ptr, radius, lo_hi=None):
+    """The grid of a radius search: cells at least ``radius`` wide, so that
+    the points within ``radius`` of a point lie in the 27 cells around it."""
+    h = np.full(len(cloud_ptr) - 1, float(radius))
+    return build_grid(xyz, cloud_ptr, h, lo_hi)
+
+
+_NONE_I8 = np.empty(0, dtype=np.int64)
+_NONE_I4 = np.empty(0, dtype=np.int32)
+_NONE_F4 = np.empty(0, dtype=np.float32)
+
+
+def ball_counts(grid, radius, n_threads, counts=None):
+    """Points within ``radius`` of every point (itself included), by point.
+
+    Parameters
+    ----------
+    grid : VoxelGrid
+        A grid with cells at least ``radius`` wide (:func:`radius_grid`).
+    radius : float
+        Inclusive radius.
+    n_threads : int
+        Threads.
+    counts : ndarray of shape (n_points,), int64, default=None
+        Written into when given.
+
+    Returns
+    -------
+    counts : ndarray of shape (n_points,), int64
+    """
+    if counts is None:
+        counts = np.empty(len(grid.order), dtype=np.int64)
+    r2 = float(radius) ** 2
+    args = (grid, r2, _NONE_I8, counts, _NONE_I4, _NONE_F4)
+    parallel_rows(g.ball_cells, grid.n_cells, n_threads, *args)
+    return counts
+
+
+def ball_lists(grid, radius, indptr, counts, indices, sqdist, n_threads):
+    """Fill the CSR neighbourhoods ``indices`` (and ``sqdist`` unless empty)
+    of every point, rows by point, sorted by (distance, index), the point
+    first; ``indptr`` from the :func:`ball_counts` ``counts``."""
+    args = (grid, float(radius) ** 2, indptr, counts, indices, sqdist)
+    parallel_rows(g.ball_cells, grid.n_cells, n_threads, *args)
+
+
+# cells per thread chunk of a block (blocks are small: split them anyway)
+_FEW = 64
+
+
+def ball_block(grid, radius, cells, counts, n_threads, indptr=None, *, sort=True):
+    """Radius neighbourhoods of the points of the cells ``cells[0]`` to
+    ``cells[1]``, rows by sorted position from the block's first point.
+
+    With ``indptr`` None, only their sizes, into ``counts``; otherwise also
+    the CSR ``indices`` (returned), rows sorted by (distance, index) only
+    with ``sort`` (unsorted: as found).
+    """
+    c0, c1 = cells
+    t0 = int(grid.cell_start[c0])
+    r2 = float(radius) ** 2
+    if indptr is None:
+        indptr, indices = _NONE_I8, _NONE_I4
+    else:
+        indices = np.empty(indptr[-1], dtype=np.int32)
+
+    def run(lo, hi):
+        g.ball_cells_local(
+            c0 + lo, c0 + hi, t0, grid, r2, indptr, counts, indices, sort
+        )
+
+    parallel_rows(run, c1 - c0, n_threads, min_chunk=_FEW)
+    return indices
+
+
+def ball_block_normals(
+    grid, radius, cells, counts, points, viewpoints, normals, curvature, n_threads
+):
+    """:func:`ball_block` sizes, and the normal and curvature of every point
+    of the block from its sorted ball, no neighbourhood stored
+    (:func:`~skpcd.preprocessing._normals_kernels.ball_normals`)."""
+    c0, c1 = cells
+    t0 = int(grid.cell_start[c0])
+    r2 = float(radius) ** 2
+    est = (points, viewpoints, normals, curvature)
+
+    def run(lo, hi):
+        ball_normals(c0 + lo, c0 + hi, t0, grid, r2, counts, *est)
+
+    parallel_rows(run, c1 - c0, n_threads, min_chunk=_FEW)

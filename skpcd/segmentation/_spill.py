@@ -1,0 +1,275 @@
+"""Out-of-core scenes: buffered square tiles spilled to temporary files.
+
+A scan larger than memory is read chunk by chunk
+(:func:`skpcd.io._chunks.iter_file_chunks`) and each chunk is routed to the
+tiles whose buffered square it falls in (:class:`TileGrid`), by appending it
+to one temporary file per tile. A tile can then be loaded on its own, with
+its buffer, and processed; memory is bounded by the largest buffered tile,
+not by the scan. The per-tile results go to memory-mapped arrays
+(:func:`result_array`, :func:`detach`).
+"""
+
+import os
+import shutil
+import tempfile
+from numbers import Integral
+from pathlib import Path
+
+import numpy as np
+
+from skpcd.io._api import read_point_cloud
+from skpcd.io._chunks import file_bounds, is_path, is_streamed, iter_file_chunks
+from skpcd.segmentation._clusters import check_scene
+from skpcd.segmentation._tile_geometry import TileGrid
+
+__all__ = [
+    "TiledScene",
+    "check_chunk_size",
+    "detach",
+    "iter_chunks",
+    "load_tile",
+    "result_array",
+    "scene_bounds",
+    "tile_scene",
+]
+
+# One record per (point, buffered tile): coordinates and the point's index in
+# the scan.
+_RECORD = np.dtype([("xyz", np.float64, (3,)), ("index", np.int64)])
+
+
+def iter_chunks(source, chunk_size, *, fields=None):
+    """Chunks of xyz (float64, ``(n, 3)``) of a path or an array; with
+    ``fields`` True, ``(xyz, extras)`` chunks with every field of the file,
+    named as :func:`~skpcd.io.read_point_cloud` with ``fields="all"`` names
+    them."""
+    if is_path(source):
+        if fields or is_streamed(source):
+            yield from iter_file_chunks(source, chunk_size, fields=fields)
+            return
+        source = read_point_cloud(source)  # read whole: no chunked reader
+    xyz = check_scene(source)
+    for start in range(0, len(xyz), chunk_size):
+        chunk = xyz[start : start + chunk_size]
+        yield (chunk, {}) if fields else chunk
+
+
+def scene_bounds(source, chunk_size):
+    """``(mins, maxs)`` of a scene for laying out tiles: the LAS header for
+    LAS/LAZ files (no pass over the points), else the points."""
+    if is_path(source):
+        bounds = file_bounds(source)
+        if bounds is not None:
+            return bounds
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for xyz in iter_chunks(source, chunk_size):
+        if len(xyz):
+            lo = np.minimum(lo, xyz.min(axis=0))
+            hi = np.maximum(hi, xyz.max(axis=0))
+    return lo, hi
+
+
+class TiledScene:
+    """A scene spilled to disk, one temporary file per buffered tile.
+
+    Made by :func:`tile_scene`; use it as a context manager (or call
+    :meth:`close`) to delete the files.
+
+    Attributes
+    ----------
+    grid : TileGrid
+        The tiles.
+    folder : pathlib.Path
+        The temporary folder holding the tile files.
+    n_points : int
+        Points in the scene.
+    mins, maxs : ndarray of shape (3,)
+        Exact bounds of the points (computed while routing).
+    counts : ndarray of shape (n_tiles,), dtype int64
+        Points in each buffered tile.
+    """
+
+    def __init__(self, grid, folder, n_points, mins, maxs, counts, owned):
+        self.grid = grid
+        self.folder = Path(folder)
+        self.n_points = int(n_points)
+        self.mins = mins
+        self.maxs = maxs
+        self.counts = counts
+        self._owned = owned
+
+    def owned_counts(self):
+        """Points owned by each tile (its core square); they sum to ``n_points``.
+
+        Returns
+        -------
+        counts : ndarray of shape (n_tiles,), dtype int64
+            Owned points per tile.
+        """
+        return self._owned.copy()
+
+    def path(self, tile):
+        """The file of a tile (it may not exist when the tile is empty)."""
+        return self.folder / f"tile_{int(tile)}.bin"
+
+    def load(self, tile):
+        """The points of a buffered tile, in scan order.
+
+        Parameters
+        ----------
+        tile : int
+            Tile index.
+
+        Returns
+        -------
+        xyz : ndarray of shape (n_tile_points, 3), dtype float64
+            Points in the buffered tile.
+        index : ndarray of shape (n_tile_points,), dtype int64
+            Their indices in the scan, ascending.
+        """
+        return load_tile(self.path(tile))
+
+    def close(self):
+        """Delete the temporary files."""
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def load_tile(path):
+    """``(xyz, index)`` of a tile file (empty arrays when it does not exist)."""
+    if not os.path.exists(path):
+        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+    records = np.fromfile(path, dtype=_RECORD)
+    return np.ascontiguousarray(records["xyz"]), records["index"].copy()
+
+
+def check_chunk_size(chunk_size):
+    if (
+        isinstance(chunk_size, bool)
+        or not isinstance(chunk_size, Integral)
+        or chunk_size < 1
+    ):
+        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    return int(chunk_size)
+
+
+def tile_scene(
+    source,
+    tile_size,
+    *,
+    buffer=0.0,
+    chunk_size=1_000_000,
+    temp_folder=None,
+    _bounds=None,
+):
+    """Cut a scene into buffered square tiles spilled to temporary files.
+
+    The scene is read chunk by chunk (a LAS/LAZ file through
+    :func:`skpcd.io.iter_points`; other files are read whole) and every
+    point is appended to the file of each buffered tile holding it, so
+    memory holds one chunk at a time.
+
+    Parameters
+    ----------
+    source : str, path-like or array-like of shape (n_points, 3+)
+        A point-cloud file or the points.
+    tile_size : float
+        Side of the square tiles, in the units of the coordinates.
+    buffer : float, default=0.0
+        Overlap added on every side of each tile.
+    chunk_size : int, default=1_000_000
+        Points read at a time.
+    temp_folder : str or path-like, default=None
+        Where to create the temporary folder of tile files (the system's
+        temporary folder when None). It needs room for the points of all
+        buffered tiles: 32 bytes per point and tile.
+
+    Returns
+    -------
+    scene : TiledScene
+        The tiles; close it (or use it in a ``with`` block) to delete the
+        files.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from skpcd.segmentation._tiling import tile_scene
+    >>> points = np.random.default_rng(0).uniform(0, 100, (1000, 3))
+    >>> with tile_scene(points, 50, buffer=5) as scene:
+    ...     xyz, index = scene.load(0)
+    ...     print(scene.grid.shape, int(scene.owned_counts().sum()))
+    ...     inside = np.all(xyz[:, :2] <= np.add(scene.grid.origin, 50 + 5))
+    ...     print(bool(inside), bool(np.all(np.diff(index) > 0)))
+    (2, 2) 1000
+    True True
+    """
+    chunk_size = check_chunk_size(chunk_size)
+    mins, maxs = scene_bounds(source, chunk_size) if _bounds is None else _bounds
+    if not np.all(mins <= maxs):
+        raise ValueError("the scene has no points")
+    grid = TileGrid.cover(mins, maxs, tile_size, buffer)
+    folder = Path(tempfile.mkdtemp(prefix="skpcd_tiles_", dir=temp_folder))
+    counts = np.zeros(grid.n_tiles, dtype=np.int64)
+    owned = np.zeros(grid.n_tiles, dtype=np.int64)
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    start = 0
+    try:
+        for xyz in iter_chunks(source, chunk_size):
+            if not len(xyz):
+                continue
+            if not np.all(np.isfinite(xyz)):
+                raise ValueError("the scene has NaN or infinite coordinates")
+            lo = np.minimum(lo, xyz.min(axis=0))
+            hi = np.maximum(hi, xyz.max(axis=0))
+            owned += np.bincount(grid.owner(xyz), minlength=grid.n_tiles)
+            rows, tiles = grid.route(xyz)
+            records = np.empty(len(rows), dtype=_RECORD)
+            records["xyz"] = xyz[rows]
+            records["index"] = rows + start
+            bounds = np.flatnonzero(np.diff(tiles)) + 1
+            for part in np.split(np.arange(len(rows)), bounds):
+                if len(part):
+                    tile = int(tiles[part[0]])
+                    with open(folder / f"tile_{tile}.bin", "ab") as f:
+                        records[part[0] : part[-1] + 1].tofile(f)
+                    counts[tile] += len(part)
+            start += len(xyz)
+    except BaseException:
+        shutil.rmtree(folder, ignore_errors=True)
+        raise
+    if start == 0:
+        shutil.rmtree(folder, ignore_errors=True)
+        raise ValueError("the scene has no points")
+    end = np.array(grid.origin) + grid.size * np.array(grid.shape)
+    if _bounds is None and not (
+        np.all(lo[:2] >= grid.origin) and np.all(hi[:2] <= end)
+    ):
+        # a LAS header whose bounds do not hold the points: tile again on
+        # the true bounds (edge tiles would own points beyond their square)
+        shutil.rmtree(folder, ignore_errors=True)
+        return tile_scene(
+            source, tile_size, buffer=buffer, chunk_size=chunk_size,
+            temp_folder=temp_folder, _bounds=(lo, hi),
+        )  # fmt: skip
+    return TiledScene(grid, folder, start, lo, hi, counts, owned)
+
+
+def result_array(folder, name, n, dtype, fill):
+    arr = np.lib.format.open_memmap(folder / name, mode="w+", dtype=dtype, shape=(n,))
+    arr[:] = fill
+    return arr
+
+
+def detach(arr, path):
+    """``arr`` (a memory map of ``path``) with the file unlinked where the
+    system allows (the mapping keeps the data); else a copy in memory."""
+    arr.flush()
+    if os.name == "posix":
+        os.unlink(path)
+        return arr
+    return np.array(arr)
