@@ -32,9 +32,18 @@ def add_segmentation_options(p):
     """The options of :func:`skpcd.segmentation.segment_scene`."""
     p.add_argument(
         "--ground",
-        choices=("aerial", "mobile", "none"),
-        default="aerial",
-        help="ground removal preset (GroundFilter, SMRF), or none (default aerial)",
+        choices=("csf", "aerial", "mobile", "none"),
+        default="csf",
+        help="ground removal preset (GroundFilter): csf, the cloth simulation "
+        "filter (needs the package cloth-simulation-filter); aerial or mobile, "
+        "SMRF (the only ones with --tile-size); or none (default csf)",
+    )
+    p.add_argument(
+        "--no-structures",
+        dest="structures",
+        action="store_false",
+        help="cluster every non-ground point alike: no facade and wire segments, "
+        "no splitting of clusters at vertical trunks (needed with --tile-size)",
     )
     p.add_argument(
         "--method",
@@ -89,9 +98,11 @@ def add_parsers(sub):
     seg = sub.add_parser(
         "segment",
         help="cut a scene into segments, one file each",
-        description="Remove the ground (SMRF), cluster the rest (DBSCAN with "
-        "automatic eps, or Euclidean clusters), keep segments within the size "
-        "range and write one file per segment plus segments.csv (points and "
+        description="Remove the ground (CSF or SMRF), take facades and overhead "
+        "wires out as segments of their own, cluster the rest (DBSCAN with "
+        "automatic eps, or Euclidean clusters) and split clusters at vertical "
+        "trunks, keep segments within the size range and write one file per "
+        "segment plus segments.csv (type: object, facade or wire; points and "
         "extents of each) into the output folder. The folder is filled under a "
         "temporary name and swapped in when whole; --overwrite replaces an "
         "earlier run's folder, never files skpcd did not write.",
@@ -111,7 +122,8 @@ def add_parsers(sub):
         "identify",
         help="segment a scene and label each segment with a saved model",
         description="Segment a scene as 'skpcd segment' does, predict the class "
-        "of each segment with a model written by 'skpcd fit', and write the "
+        "of each segment with a model written by 'skpcd fit' (facade and wire "
+        "segments are classed facade and wire, not predicted), and write the "
         "scene with per-point fields segment (-1: none), class, ground and the "
         "probability or similarity of the answer. A LAS/LAZ scene written as "
         "LAS/LAZ keeps every point and dimension; ground points get "
@@ -165,6 +177,7 @@ def segment_file(args, command, fields=None):
             max_cluster_size=args.max_size,
             random_state=args.random_state,
             n_jobs=args.n_jobs,
+            structures=args.structures,
             **tiling,
         )
     except ValueError as exc:
@@ -180,8 +193,14 @@ def segment_file(args, command, fields=None):
             f"scene     {args.scene}: {len(labels)} points, "
             f"{int(result.ground.sum())} ground"
         )
+        kinds = result.kinds if result.kinds is not None else []
+        typed = ", ".join(
+            f"{int((kinds == k).sum())} {k}" for k in ("facade", "wire") if len(kinds)
+        )
         print(
-            f"segments  {result.n_segments} ({args.method}, eps {result.eps:.3f}); "
+            f"segments  {result.n_segments} ({args.method}, eps {result.eps:.3f}"
+            + (f"; {typed}" if typed else "")
+            + "); "
             f"{int(((labels < 0) & ~result.ground).sum())} points in none "
             f"({time.perf_counter() - start:.1f} s)"
         )
@@ -242,6 +261,7 @@ def run_segment(args):
         args, "segment", "all" if args.keep_fields else None
     )
     n = result.n_segments
+    kinds = result.kinds if result.kinds is not None else np.full(n, "object", object)
     width = max(4, len(str(n - 1)))
     rows = []
     with atomic_folder(out, overwrite=args.overwrite, owned=_written_by_segment) as tmp:
@@ -252,25 +272,27 @@ def run_segment(args):
             except ValueError as exc:  # a field the format cannot hold
                 raise CommandError("segment", str(exc)) from exc
             lo, hi = seg.min(axis=0), seg.max(axis=0)
-            rows.append([name, i, len(seg), *lo, *hi, *(hi - lo)])
+            rows.append([name, i, kinds[i], len(seg), *lo, *hi, *(hi - lo)])
         with open(tmp / SEGMENTS_SUMMARY, "w", newline="") as f:
             writer = csv.writer(f)
             writer.writerow(
-                ["file", "segment", "n_points"]
+                ["file", "segment", "type", "n_points"]
                 + [f"{a}_{c}" for a in ("min", "max", "extent") for c in "xyz"]
             )
             for row in rows:
-                writer.writerow(row[:3] + [f"{v:.4f}" for v in row[3:]])
+                writer.writerow(row[:4] + [f"{v:.4f}" for v in row[4:]])
     if not args.quiet:
         print(f"written   {n} {args.format} files and {SEGMENTS_SUMMARY} -> {out}")
     return 0
 
 
-def _classify_segments(model, segments, args):
+def _classify_segments(model, segments, args, types=None):
     """Answer, its kind, confidence and size of each segment, predicted in
     batches of about ``_PREDICT_POINTS`` points (the answers do not depend
-    on the batches)."""
+    on the batches). Segments whose ``types`` is not "object" (facades,
+    wires) are not predicted: their answer is their type, with no score."""
     preds, scores, sizes, kind, batch, size = [], [], [], None, [], 0
+    fixed = {}
 
     def flush():
         nonlocal kind
@@ -279,18 +301,28 @@ def _classify_segments(model, segments, args):
         scores.append(np.full(len(batch), np.nan) if score is None else score)
         batch.clear()
 
-    for seg, _ in segments:
-        batch.append(seg)
+    for i, (seg, _) in enumerate(segments):
         sizes.append(len(seg))
+        if types is not None and types[i] != "object":
+            fixed[i] = str(types[i])
+            continue
+        batch.append(seg)
         size += len(seg)
         if size >= _PREDICT_POINTS:
             flush()
             size = 0
     if batch:
         flush()
-    if not preds:
-        return np.array([], dtype=object), None, np.array([]), np.array([], int)
-    return np.concatenate(preds), kind, np.concatenate(scores), np.array(sizes)
+    n = len(sizes)
+    pred = np.empty(n, dtype=object)
+    score = np.full(n, np.nan)
+    predicted = np.setdiff1d(np.arange(n), list(fixed)) if fixed else np.arange(n)
+    if preds:
+        pred[predicted] = np.concatenate(preds)
+        score[predicted] = np.concatenate(scores)
+    for i, name in fixed.items():
+        pred[i] = name
+    return pred, kind, score, np.array(sizes, dtype=int)
 
 
 def _per_point(labels, values, fill, dtype, out, chunk=1_000_000):
@@ -328,7 +360,10 @@ def run_identify(args):
             )
         )
         pred, kind, seg_score, seg_sizes = _classify_segments(
-            model, _segments(args, points, {}, result, work, fields=False), args
+            model,
+            _segments(args, points, {}, result, work, fields=False),
+            args,
+            result.kinds,
         )
         classes = list(getattr(model, "classes_", []))
         classes += sorted({str(p) for p in pred} - {str(c) for c in classes})

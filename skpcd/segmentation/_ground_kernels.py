@@ -32,6 +32,24 @@ def cell_minimum(xyz, x0, y0, cell, nx, ny, c0, r0, zmin):
 
 
 @njit(cache=True, nogil=True)
+def cell_mean(xyz, mask, x0, y0, cell, nx, ny, mean, count):
+    """Mean z of the points with ``mask`` in every cell of the raster of
+    :func:`cell_minimum` (``mean`` and ``count`` zeroed beforehand; cells
+    without such a point keep 0 and count 0)."""
+    for i in range(len(xyz)):
+        if not mask[i]:
+            continue
+        c = min(max(math.floor((xyz[i, 0] - x0) / cell), 0), nx - 1)
+        r = min(max(math.floor((xyz[i, 1] - y0) / cell), 0), ny - 1)
+        mean[r, c] += xyz[i, 2]
+        count[r, c] += 1
+    for r in range(ny):
+        for c in range(nx):
+            if count[r, c] > 0:
+                mean[r, c] /= count[r, c]
+
+
+@njit(cache=True, nogil=True)
 def bilinear(xyz, x0, y0, cell, nx, ny, c0, r0, grid, out):
     """A raster of ``nx`` x ``ny`` cells (values at the cell centres, origin
     ``x0, y0``) interpolated bilinearly at the points' xy into ``out``;

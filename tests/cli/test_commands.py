@@ -528,6 +528,8 @@ def test_segment_tiled_writes_the_untiled_files(tmp_path, capsys, ext, scene_fil
     scene = tmp_path / f"scene{ext}"
     scene_file(scene, random_state=2)
     args = ["segment", str(scene), "--eps", "1.0", "--min-size", "30", "--quiet"]
+    # tiles take an SMRF ground preset and no structures (else refused)
+    args += ["--ground", "aerial", "--no-structures"]
     assert main([*args, "-o", str(tmp_path / "whole"), "--keep-fields"]) == 0
     tiled = [*args, "-o", str(tmp_path / "tiles"), "--keep-fields"]
     assert main([*tiled, "--tile-size", "12"]) == 0
@@ -567,7 +569,7 @@ def test_scheduler_gives_the_local_outputs(
     scene = tmp_path / "scene.ply"
     scene_file(scene, random_state=2)
     seg = ["segment", str(scene), "--eps", "1.0", "--min-size", "30", "--quiet"]
-    seg += ["--tile-size", "12", "--ground", "none"]
+    seg += ["--tile-size", "12", "--ground", "none", "--no-structures"]
     labelled_folder(tmp_path / "train", n_per_class=3)
     outputs = {}
     for where, extra in (("local", []), ("dask", ["--scheduler", address])):

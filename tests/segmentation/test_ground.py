@@ -77,7 +77,10 @@ def test_low_noise_is_not_ground_and_does_not_dig_the_dem():
 
 
 def test_presets():
-    assert GroundFilter().get_params() == {**GROUND_PRESETS["aerial"], "low_noise": 1.0}
+    params = GroundFilter().get_params()
+    assert {k: params[k] for k in GROUND_PRESETS["aerial"]} == GROUND_PRESETS["aerial"]
+    assert params["method"] == "smrf" and params["low_noise"] == 1.0
+    assert GroundFilter(**GROUND_PRESETS["csf"]).method == "csf"
     mobile = GroundFilter(**GROUND_PRESETS["mobile"])
     assert mobile.cell == 0.5 and mobile.threshold < GroundFilter().threshold
 

@@ -8,9 +8,20 @@ import joblib
 import numpy as np
 import pytest
 
-from skpcd.segmentation import make_scene, segment_scene
+from skpcd.segmentation import make_scene
+from skpcd.segmentation import segment_scene as _segment_scene
 from skpcd.segmentation._spill import tile_scene
 from skpcd.segmentation._tile_geometry import TileGrid
+
+
+def segment_scene(*args, **kwargs):
+    """segment_scene with the settings the tiled path takes: an SMRF ground
+    preset ("aerial" unless given) and no structures (CSF and the
+    structures refuse tile_size, see test_structures.py)."""
+    kwargs.setdefault("ground", "aerial")
+    kwargs.setdefault("structures", False)
+    return _segment_scene(*args, **kwargs)
+
 
 TILE = 25.0
 

@@ -14,9 +14,20 @@ import numpy as np
 import pytest
 
 from skpcd.datasets import make_urban_objects
-from skpcd.segmentation import GROUND_PRESETS, GroundFilter, segment_scene
+from skpcd.segmentation import GROUND_PRESETS, GroundFilter
+from skpcd.segmentation import segment_scene as _segment_scene
 from skpcd.segmentation._ground import reach_cells
 from skpcd.segmentation._tiling import TileGrid, _window_filter
+
+
+def segment_scene(*args, **kwargs):
+    """segment_scene with the settings the tiled path takes: an SMRF ground
+    preset ("aerial" unless given) and no structures (CSF and the
+    structures refuse tile_size, see test_structures.py)."""
+    kwargs.setdefault("ground", "aerial")
+    kwargs.setdefault("structures", False)
+    return _segment_scene(*args, **kwargs)
+
 
 # directions (degrees) and lengths (fractions) of the street's three legs
 _HEADINGS = np.deg2rad([20.0, 65.0, 10.0])

@@ -1,0 +1,376 @@
+"""Structures that touch objects: facades, overhead wires, poles in clusters.
+
+A street scan is not a set of separate objects on the ground: trees grow
+against facades, wires run from pole to pole through the crowns, a lamp
+post stands inside a tree. DBSCAN joins whatever touches. Before
+clustering, the non-ground points are typed by the shape of their
+neighbourhood (the eigenvalues ``l1 >= l2 >= l3`` of the covariance of
+their k nearest neighbours):
+
+- facade points: planar (``(l2 - l3) / l1``), with a horizontal normal,
+  linked into pieces at least ``facade_min_height`` tall and
+  ``facade_min_length`` long, then grown over the neighbours that are
+  mostly facade;
+- wire points: linear (``(l1 - l2) / l1``), with a horizontal-ish axis,
+  thin, at least ``wire_min_height`` above the ground, linked into pieces
+  at least ``wire_min_length`` long.
+
+Each gets its own segments (the linked pieces); the other points are
+clustered by DBSCAN, and a cluster holding several vertical trunks (poles,
+tree trunks: linear, vertical, in the first metres above the ground) is
+split between them, every point going to the trunk nearest along the
+k-NN graph of the cluster.
+"""
+
+import numpy as np
+
+from skpcd.segmentation._clusters import euclidean_clusters
+
+__all__ = ["STRUCTURE_DEFAULTS", "height_above_ground", "segment_structures"]
+
+# the parameters of segment_scene(structures=True); lengths in metres
+STRUCTURE_DEFAULTS = {
+    "n_neighbors": 12,
+    "facade_min_height": 3.0,
+    "facade_min_length": 4.0,
+    "wire_min_height": 3.0,
+    "wire_min_length": 4.0,
+    "wire_max_width": 0.3,
+    "trunk_min_height": 1.2,
+}
+
+# kinds of segment, as written in segments.csv
+KINDS = ("object", "facade", "wire")
+
+# thresholds on the local shape (dimensionless)
+_PLANAR = 0.5  # planarity of a facade point
+_VERTICAL_NORMAL = 0.3  # largest |normal z| of a facade point (73 degrees)
+_LINEAR = 0.8  # linearity of a wire point
+_HORIZONTAL_AXIS = 0.5  # largest |axis z| of a wire point (30 degrees)
+_TRUNK_LINEAR = 0.6  # linearity of a trunk point
+_VERTICAL_AXIS = 0.85  # smallest |axis z| of a trunk point
+_TRUNK_BAND = (0.2, 3.0)  # heights of trunk points above the ground
+_TRUNK_MAX_WIDTH = 0.35  # largest horizontal standard deviation of a trunk
+_GROW_SHARE = 0.5  # a point with this share of facade neighbours is facade
+_NORMAL_COS = float(np.cos(np.deg2rad(20.0)))  # normals of one facade region
+_GROW_STEPS = 2
+
+
+def height_above_ground(xyz, ground_xyz, cell=1.0):
+    """Height of points above the ground points: ``z`` minus the mean height
+    of the ground points in the nearest ``cell`` x ``cell`` square holding
+    ground; ``z`` minus the lowest ``z`` without ground. The squares are
+    those holding ground only (a k-d tree of their centres), so the cost
+    follows the points, not the scene's bounding box.
+
+    Parameters
+    ----------
+    xyz : ndarray of shape (n_points, 3)
+    ground_xyz : ndarray of shape (n_ground, 3)
+    cell : float, default=1.0
+
+    Returns
+    -------
+    height : ndarray of shape (n_points,), float32
+    """
+    from scipy.spatial import cKDTree
+
+    if len(xyz) == 0:
+        return np.zeros(0, dtype=np.float32)
+    if len(ground_xyz) == 0:
+        return (xyz[:, 2] - xyz[:, 2].min()).astype(np.float32)
+    ij = np.floor((ground_xyz[:, :2] - ground_xyz[:, :2].min(axis=0)) / cell)
+    ij = ij.astype(np.int64)
+    key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+    uniq, first, inv = np.unique(key, return_index=True, return_inverse=True)
+    zmean = np.bincount(inv, ground_xyz[:, 2]) / np.bincount(inv)
+    centre = ground_xyz[first, :2]  # a ground point of each square
+    del key, ij, inv, uniq
+    _, j = cKDTree(centre).query(xyz[:, :2])
+    return (xyz[:, 2] - zmean[j]).astype(np.float32)
+
+
+def _components(xyz, mask, eps, n_jobs):
+    """Connected components (``eps`` apart) of the masked points: labels
+    over all points (-1 outside the mask) and their count."""
+    labels = np.full(len(xyz), -1, dtype=np.int64)
+    idx = np.flatnonzero(mask)
+    if len(idx) == 0:
+        return labels, 0
+    sub = euclidean_clusters(xyz[idx], eps=eps, min_cluster_size=1, n_jobs=n_jobs)
+    labels[idx] = sub
+    return labels, int(sub.max()) + 1
+
+
+def _extents(labels, xyz, n):
+    from skpcd.segmentation._structure_kernels import segment_extents
+
+    lo = np.full((n, 3), np.inf)
+    hi = np.full((n, 3), -np.inf)
+    count = np.zeros(n, dtype=np.int64)
+    segment_extents(labels, xyz, n, lo, hi, count)
+    return lo, hi, count
+
+
+def _xy_axes(labels, xyz, n):
+    """Per component: the standard deviations of xy along its major and
+    minor horizontal axes."""
+    from skpcd.segmentation._structure_kernels import component_covariance
+
+    mean = np.zeros((n, 2))
+    cov = np.zeros((n, 3))
+    count = np.zeros(n, dtype=np.int64)
+    component_covariance(labels, np.ascontiguousarray(xyz[:, :2]), n, mean, cov, count)
+    half_trace = (cov[:, 0] + cov[:, 2]) / 2
+    root = np.sqrt(((cov[:, 0] - cov[:, 2]) / 2) ** 2 + cov[:, 1] ** 2)
+    major = np.sqrt(np.maximum(half_trace + root, 0))
+    minor = np.sqrt(np.maximum(half_trace - root, 0))
+    return major, minor
+
+
+def _keep(labels, good):
+    """Points whose component is ``good``."""
+    out = np.zeros(len(labels), dtype=bool)
+    inside = labels >= 0
+    out[inside] = good[labels[inside]]
+    return out
+
+
+def local_shapes(xyz, nb):
+    """Linearity, planarity, normal (n, 3), |axis z| and spread of every
+    point."""
+    from skpcd.segmentation._structure_kernels import local_shape
+
+    out = [np.empty(len(xyz), dtype=np.float32) for _ in range(4)]
+    normal = np.empty((len(xyz), 3), dtype=np.float32)
+    out.insert(2, normal)
+    local_shape(xyz, nb.indptr, nb.indices, *out)
+    return out
+
+
+def _regions(nb, mask, normal):
+    """Connected regions of the masked points over the k-NN graph, joined
+    only where the normals agree within ``_NORMAL_ANGLE``: one per smooth
+    surface (a wall), none across a pole or a crown whose normals turn."""
+    from scipy.sparse import csr_array
+    from scipy.sparse.csgraph import connected_components
+
+    from skpcd.segmentation._structure_kernels import aligned_edges
+
+    n = len(mask)
+    keep = np.empty(len(nb.indices), dtype=bool)
+    aligned_edges(nb.indptr, nb.indices, mask, normal, _NORMAL_COS, keep)
+    rows = np.repeat(np.arange(n, dtype=np.int32), np.diff(nb.indptr))[keep]
+    graph = csr_array(
+        (np.ones(len(rows), dtype=np.int8), (rows, nb.indices[keep])), shape=(n, n)
+    )
+    del rows, keep
+    _, labels = connected_components(graph, directed=False)
+    labels = labels.astype(np.int64)
+    labels[~mask] = -1
+    # renumber the masked regions 0, 1, ...
+    inside = labels >= 0
+    _, labels[inside] = np.unique(labels[inside], return_inverse=True)
+    return labels, int(labels.max()) + 1 if inside.any() else 0
+
+
+def find_structures(xyz, height, nb, eps, params, n_jobs=None):
+    """Kind of every point: 0 object, 1 facade, 2 wire (int8)."""
+    from skpcd.segmentation._structure_kernels import neighbour_share
+
+    lin, plan, normal, axis_z, spread = local_shapes(xyz, nb)
+    normal_z = np.abs(normal[:, 2])
+    kind = np.zeros(len(xyz), dtype=np.int8)
+    # wires: linear, horizontal-ish, thin, high; long pieces
+    cand = (
+        (lin >= _LINEAR)
+        & (axis_z <= _HORIZONTAL_AXIS)
+        & (spread <= params["wire_max_width"] / 2)
+        & (height >= params["wire_min_height"])
+    )
+    labels, n = _components(xyz, cand, eps, n_jobs)
+    if n:
+        _, minor = _xy_axes(labels, xyz, n)
+        lo, hi, _ = _extents(labels, xyz, n)
+        length = np.hypot(hi[:, 0] - lo[:, 0], hi[:, 1] - lo[:, 1])
+        good = (length >= params["wire_min_length"]) & (
+            minor <= params["wire_max_width"]
+        )
+        kind[_keep(labels, good)] = 2
+    # facades: planar, vertical; tall and long pieces, grown over the
+    # neighbours that are mostly facade
+    cand = (plan >= _PLANAR) & (normal_z <= _VERTICAL_NORMAL) & (kind == 0)
+    labels, n = _regions(nb, cand, normal)
+    del normal
+    if n:
+        lo, hi, _ = _extents(labels, xyz, n)
+        length = np.hypot(hi[:, 0] - lo[:, 0], hi[:, 1] - lo[:, 1])
+        good = (hi[:, 2] - lo[:, 2] >= params["facade_min_height"]) & (
+            length >= params["facade_min_length"]
+        )
+        facade = _keep(labels, good)
+        # the planar vertical patches linked to a facade (window recesses,
+        # doors, shop fronts set back from the wall) are facade too
+        comp, m = _components(xyz, cand | facade, eps, n_jobs)
+        linked = np.zeros(m + 1, dtype=bool)
+        linked[comp[facade]] = True
+        facade = (comp >= 0) & linked[comp]
+        del comp
+        share = np.empty(len(xyz), dtype=np.float32)
+        for _ in range(_GROW_STEPS):
+            neighbour_share(nb.indptr, nb.indices, facade, share)
+            facade |= (share >= _GROW_SHARE) & (kind == 0)
+        kind[facade] = 1
+    trunk = (
+        (kind == 0)
+        & (lin >= _TRUNK_LINEAR)
+        & (axis_z >= _VERTICAL_AXIS)
+        & (height >= _TRUNK_BAND[0])
+        & (height <= _TRUNK_BAND[1])
+    )
+    return kind, trunk
+
+
+def find_trunks(xyz, trunk, eps, min_height, n_jobs=None):
+    """Vertical trunks: pieces of trunk points at least ``min_height`` tall
+    and thin; the trunk of every point (-1: none) and their count."""
+    labels, n = _components(xyz, trunk, min(eps, 0.5), n_jobs)
+    if not n:
+        return labels, 0
+    lo, hi, _ = _extents(labels, xyz, n)
+    major, _ = _xy_axes(labels, xyz, n)
+    good = (hi[:, 2] - lo[:, 2] >= min_height) & (major <= _TRUNK_MAX_WIDTH)
+    new = np.full(n + 1, -1, dtype=np.int64)
+    new[:-1][good] = np.arange(int(good.sum()))
+    return new[labels], int(good.sum())
+
+
+def split_at_trunks(xyz, labels, trunks, nb):
+    """Clusters holding several trunks, split: each point goes to the trunk
+    nearest along the k-NN graph within its cluster (by straight distance
+    to the trunk's points when the graph does not reach it). Returns new
+    labels (clusters renumbered) and how many clusters were split."""
+    from scipy.sparse import csr_array
+    from scipy.sparse.csgraph import dijkstra
+    from scipy.spatial import cKDTree
+
+    has = (trunks >= 0) & (labels >= 0)
+    if not has.any():
+        return labels, 0
+    # trunks per cluster (a trunk belongs to the cluster of most of its points)
+    n_trunks = int(trunks.max()) + 1
+    pair, n_pair = np.unique(
+        np.column_stack([trunks[has], labels[has]]), axis=0, return_counts=True
+    )
+    # per trunk, the pair with the most points (sorted by trunk, then count)
+    order = np.lexsort((n_pair, pair[:, 0]))
+    last = np.r_[pair[order, 0][1:] != pair[order, 0][:-1], True]
+    t_cluster = np.full(n_trunks, -1, dtype=np.int64)
+    t_cluster[pair[order, 0][last]] = pair[order, 1][last]
+    per_cluster = np.bincount(t_cluster[t_cluster >= 0], minlength=labels.max() + 1)
+    split = np.flatnonzero(per_cluster >= 2)
+    if len(split) == 0:
+        return labels, 0
+    inside = np.isin(labels, split)
+    idx = np.flatnonzero(inside)
+    local = np.full(len(xyz), -1, dtype=np.int64)
+    local[idx] = np.arange(len(idx))
+    # edges of the k-NN graph within a cluster being split
+    rows = np.repeat(np.arange(len(xyz)), np.diff(nb.indptr))
+    cols = nb.indices.astype(np.int64)
+    keep = inside[rows] & (labels[rows] == labels[cols]) & (rows != cols)
+    rows, cols = rows[keep], cols[keep]
+    w = np.sqrt(nb.sqdist[keep].astype(np.float64)) + 1e-6
+    graph = csr_array((w, (local[rows], local[cols])), shape=(len(idx),) * 2)
+    seeds = np.flatnonzero(inside & (trunks >= 0) & (t_cluster[trunks] == labels))
+    _, _, source = dijkstra(
+        graph, directed=False, indices=local[seeds], min_only=True,
+        return_predecessors=True,
+    )  # fmt: skip
+    seed_trunk = np.full(len(idx), -1, dtype=np.int64)
+    seed_trunk[local[seeds]] = trunks[seeds]
+    owner = np.where(source >= 0, seed_trunk[np.maximum(source, 0)], -1)
+    lost = np.flatnonzero(owner < 0)
+    if len(lost):
+        # the trunk point nearest in space, within the same cluster
+        key = 1e6 * (labels[seeds] - labels[seeds].min())
+        tree = cKDTree(np.column_stack([xyz[seeds], key]))
+        q = np.column_stack(
+            [xyz[idx[lost]], 1e6 * (labels[idx[lost]] - labels[seeds].min())]
+        )
+        owner[lost] = trunks[seeds[tree.query(q)[1]]]
+    out = labels.copy()
+    base = labels.max() + 1
+    out[idx] = base + owner
+    # renumber 0, 1, ... in the order of the old cluster, then the trunk
+    valid = out >= 0
+    _, out[valid] = np.unique(out[valid], return_inverse=True)
+    return out, len(split)
+
+
+def segment_structures(xyz, ground_xyz, eps, params, cluster, n_jobs=None):
+    """Facades, wires and objects of the non-ground points.
+
+    Parameters
+    ----------
+    xyz : ndarray of shape (n_points, 3)
+        The non-ground points.
+    ground_xyz : ndarray of shape (n_ground, 3)
+        The ground points (heights above the ground are measured from them).
+    eps : float
+        Linking distance of the facade and wire pieces (the clustering
+        radius).
+    params : dict
+        ``STRUCTURE_DEFAULTS`` or overrides of them.
+    cluster : callable
+        ``cluster(mask) -> labels`` of the masked points (DBSCAN), -1 noise.
+    n_jobs : int or None
+
+    Returns
+    -------
+    labels : ndarray of shape (n_points,), int64
+        Segment of each point (-1 none), objects first, then facades, then
+        wires (not yet filtered by size).
+    kinds : ndarray of shape (n_segments,), dtype int8
+        Index in ``KINDS`` of each segment.
+    info : dict
+        Counts: points typed facade and wire, clusters split.
+    """
+    from skpcd.preprocessing import compute_neighborhoods
+
+    params = {**STRUCTURE_DEFAULTS, **(params or {})}
+    labels = np.full(len(xyz), -1, dtype=np.int64)
+    if len(xyz) < 3:
+        return labels, np.zeros(0, dtype=np.int8), {}
+    nb = compute_neighborhoods(xyz, n_neighbors=params["n_neighbors"], n_jobs=n_jobs)
+    height = height_above_ground(xyz, ground_xyz)
+    kind, trunk_points = find_structures(xyz, height, nb, eps, params, n_jobs)
+    del height
+    objects = kind == 0
+    sub = cluster(objects)
+    trunks, n_trunks = find_trunks(
+        xyz, trunk_points & objects, eps, params["trunk_min_height"], n_jobs
+    )
+    obj_labels = np.full(len(xyz), -1, dtype=np.int64)
+    obj_labels[objects] = sub
+    n_split = 0
+    if n_trunks >= 2:
+        obj_labels, n_split = split_at_trunks(xyz, obj_labels, trunks, nb)
+    del nb
+    n_obj = int(obj_labels.max()) + 1
+    labels = obj_labels
+    kinds = [np.zeros(n_obj, dtype=np.int8)]
+    offset = n_obj
+    for k in (1, 2):
+        part, n = _components(xyz, kind == k, eps, n_jobs)
+        inside = part >= 0
+        labels[inside] = part[inside] + offset
+        kinds.append(np.full(n, k, dtype=np.int8))
+        offset += n
+    info = {
+        "facade_points": int((kind == 1).sum()),
+        "wire_points": int((kind == 2).sum()),
+        "trunks": n_trunks,
+        "clusters_split": n_split,
+    }
+    return labels, np.concatenate(kinds), info
