@@ -4,7 +4,7 @@ from sklearn.ensemble import RandomForestClassifier
 from sklearn.pipeline import FeatureUnion, make_pipeline
 
 from skpcd.classification._reject import RejectUnknown
-from skpcd.features import ShapeFeatures, VerticalProfile
+from skpcd.features import PFHTransformer, ShapeFeatures, VerticalProfile
 
 __all__ = ["PIPELINES", "make_default_pipeline", "make_named_pipeline"]
 
@@ -13,13 +13,15 @@ def make_default_pipeline(*, unknown_threshold=None, random_state=0, n_jobs=None
     """Build the default segment-identification pipeline.
 
     Global shape features of each segment
-    (:class:`~skpcd.features.ShapeFeatures`) beside descriptors of its
-    vertical structure (:class:`~skpcd.features.VerticalProfile`: height
-    slices, the pole, what the pole carries), followed by a random forest
-    of 300 trees. It takes a list of clouds and predicts one label per
-    cloud; it composes with :func:`~sklearn.model_selection.cross_val_score`
-    and :class:`~sklearn.model_selection.GridSearchCV` like any
-    scikit-learn pipeline (``randomforestclassifier__max_features``,
+    (:class:`~skpcd.features.ShapeFeatures`), descriptors of its vertical
+    structure (:class:`~skpcd.features.VerticalProfile`: height slices, the
+    pole, what the pole carries) and its PFH averaged over its points
+    (:class:`~skpcd.features.PFHTransformer` with ``n_neighbors=10`` and
+    ``pooling="mean"``), followed by a random forest of 300 trees. It
+    takes a list of clouds and predicts one label per cloud; it composes
+    with :func:`~sklearn.model_selection.cross_val_score` and
+    :class:`~sklearn.model_selection.GridSearchCV` like any scikit-learn
+    pipeline (``randomforestclassifier__max_features``,
     ``featureunion__vertical__n_slices``...).
 
     Parameters
@@ -33,7 +35,7 @@ def make_default_pipeline(*, unknown_threshold=None, random_state=0, n_jobs=None
     random_state : int, RandomState instance or None, default=0
         Seeds the forest.
     n_jobs : int, default=None
-        Threads for the forest; None means 1, -1 all cores.
+        Threads for the PFH and the forest; None means 1, -1 all cores.
 
     Returns
     -------
@@ -66,14 +68,21 @@ def make_default_pipeline(*, unknown_threshold=None, random_state=0, n_jobs=None
     if unknown_threshold is not None:
         forest = RejectUnknown(forest, threshold=unknown_threshold)
     return make_pipeline(
-        FeatureUnion([("shape", ShapeFeatures()), ("vertical", VerticalProfile())]),
+        FeatureUnion(
+            [
+                ("shape", ShapeFeatures()),
+                ("vertical", VerticalProfile()),
+                ("pfh", PFHTransformer(n_neighbors=10, pooling="mean", n_jobs=n_jobs)),
+            ]
+        ),
         forest,
     )
 
 
 #: The pipelines of ``skpcd evaluate/fit --pipeline NAME``: name -> what it is.
 PIPELINES = {
-    "default": "shape features + vertical profile -> random forest (300 trees)",
+    "default": "shape features + vertical profile + mean PFH (k=10) -> "
+    "random forest (300 trees)",
     "case-based": "improved FPFH (k=10) -> CaseBasedClassifier (threshold 0.8)",
 }
 
