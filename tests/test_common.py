@@ -69,7 +69,9 @@ TWO_D = [
     CaseBasedClassifier(threshold=None, w1=0.3),
     TWO_STEP,
     # groups learned in fit from the inner-CV confusions of the coarse estimator
-    TwoStepClassifier(LogisticRegression(), groups="auto", random_state=0),
+    TwoStepClassifier(
+        DecisionTreeClassifier(random_state=0), groups="auto", cv=2, random_state=0
+    ),
     RejectUnknown(LogisticRegression()),
 ]
 
