@@ -3,6 +3,7 @@ every point's neighbourhood, and neighbour votes over the k-NN graph."""
 
 import math
 
+import numpy as np
 from numba import njit
 
 
@@ -147,6 +148,29 @@ def aligned_edges(indptr, indices, mask, normal, min_cos, keep):
                 + normal[i, 2] * normal[k, 2]
             )
             keep[j] = abs(d) >= min_cos
+
+
+@njit(cache=True, nogil=True)
+def column_counts(order, starts, zs, mask, dz_lo, dz_hi, out):
+    """For every masked point: how many points of its column lie between
+    ``dz_lo`` and ``dz_hi`` above or below it. The points ``order[starts[c]:
+    starts[c + 1]]`` make column ``c``, sorted by height, ``zs`` their
+    heights in that order."""
+    for c in range(len(starts) - 1):
+        lo, hi = starts[c], starts[c + 1]
+        col = zs[lo:hi]
+        for a in range(lo, hi):
+            i = order[a]
+            if not mask[i]:
+                continue
+            z = zs[a]
+            n = np.searchsorted(col, z + dz_hi, side="right") - np.searchsorted(
+                col, z + dz_lo, side="left"
+            )
+            n += np.searchsorted(col, z - dz_lo, side="right") - np.searchsorted(
+                col, z - dz_hi, side="left"
+            )
+            out[i] = n
 
 
 @njit(cache=True, nogil=True)

@@ -54,6 +54,9 @@ _TRUNK_MAX_WIDTH = 0.35  # largest horizontal standard deviation of a trunk
 _GROW_SHARE = 0.5  # a point with this share of facade neighbours is facade
 _NORMAL_COS = float(np.cos(np.deg2rad(20.0)))  # normals of one facade region
 _GROW_STEPS = 2
+_COLUMN = 0.5  # side of the columns of the wire test (metres)
+_WIRE_COLUMN_POINTS = 3  # most points 0.3-2 m above or below a wire point
+_FLAT_SHARE = 0.5  # planar share of a cluster touching a facade that joins it
 
 
 def height_above_ground(xyz, ground_xyz, cell=1.0):
@@ -88,6 +91,28 @@ def height_above_ground(xyz, ground_xyz, cell=1.0):
     del key, ij, inv, uniq
     _, j = cKDTree(centre).query(xyz[:, :2])
     return (xyz[:, 2] - zmean[j]).astype(np.float32)
+
+
+def _column_counts(xyz, mask):
+    """For the masked points: points within 0.3 to 2 m above or below them
+    in their ``_COLUMN`` x ``_COLUMN`` column (others 0)."""
+    from skpcd.segmentation._structure_kernels import column_counts
+
+    out = np.zeros(len(xyz), dtype=np.int64)
+    if not mask.any():
+        return out
+    ij = np.floor((xyz[:, :2] - xyz[:, :2].min(axis=0)) / _COLUMN).astype(np.int64)
+    key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+    del ij
+    # only the columns holding a masked point
+    wanted = np.isin(key, np.unique(key[mask]))
+    idx = np.flatnonzero(wanted)
+    order = idx[np.lexsort((xyz[idx, 2], key[idx]))]
+    sk = key[order]
+    starts = np.flatnonzero(np.r_[True, sk[1:] != sk[:-1], True])
+    zs = np.ascontiguousarray(xyz[order, 2])
+    column_counts(order, starts, zs, mask, 0.3, 2.0, out)
+    return out
 
 
 def _components(xyz, mask, eps, n_jobs):
@@ -188,6 +213,9 @@ def find_structures(xyz, height, nb, eps, params, n_jobs=None):
         & (spread <= params["wire_max_width"] / 2)
         & (height >= params["wire_min_height"])
     )
+    # a wire hangs free: the points of a facade scanned in horizontal rings
+    # (a spinning sensor) are linear too, but rings lie above and below
+    cand &= _column_counts(xyz, cand) <= _WIRE_COLUMN_POINTS
     labels, n = _components(xyz, cand, eps, n_jobs)
     if n:
         _, minor = _xy_axes(labels, xyz, n)
@@ -228,7 +256,16 @@ def find_structures(xyz, height, nb, eps, params, n_jobs=None):
         & (height >= _TRUNK_BAND[0])
         & (height <= _TRUNK_BAND[1])
     )
-    return kind, trunk
+    return kind, trunk, plan >= _PLANAR
+
+
+def filter_labels(labels):
+    """Labels renumbered 0, 1, ... in order (-1 kept)."""
+    out = np.asarray(labels, dtype=np.int64).copy()
+    inside = out >= 0
+    if inside.any():
+        _, out[inside] = np.unique(out[inside], return_inverse=True)
+    return out
 
 
 def find_trunks(xyz, trunk, eps, min_height, n_jobs=None):
@@ -344,10 +381,31 @@ def segment_structures(xyz, ground_xyz, eps, params, cluster, n_jobs=None):
         return labels, np.zeros(0, dtype=np.int8), {}
     nb = compute_neighborhoods(xyz, n_neighbors=params["n_neighbors"], n_jobs=n_jobs)
     height = height_above_ground(xyz, ground_xyz)
-    kind, trunk_points = find_structures(xyz, height, nb, eps, params, n_jobs)
+    kind, trunk_points, planar = find_structures(xyz, height, nb, eps, params, n_jobs)
     del height
     objects = kind == 0
     sub = cluster(objects)
+    if (kind == 1).any() and len(sub):
+        # clusters of mostly planar points touching a facade (balconies,
+        # window reveals, shop signs, roof edges) are part of it
+        n_sub = int(sub.max()) + 1
+        inside = sub >= 0
+        share = np.bincount(
+            sub[inside], weights=planar[objects][inside], minlength=n_sub
+        ) / np.maximum(np.bincount(sub[inside], minlength=n_sub), 1)
+        flat = np.zeros(len(xyz), dtype=bool)
+        flat[np.flatnonzero(objects)[inside]] = share[sub[inside]] >= _FLAT_SHARE
+        comp, m = _components(xyz, flat | (kind == 1), eps, n_jobs)
+        touching = np.zeros(m + 1, dtype=bool)
+        touching[comp[kind == 1]] = True
+        absorbed = flat & touching[comp]
+        if absorbed.any():
+            kind[absorbed] = 1
+            keep = ~absorbed[objects]
+            objects = kind == 0
+            sub = filter_labels(sub[keep])
+        del comp, flat
+    del planar
     trunks, n_trunks = find_trunks(
         xyz, trunk_points & objects, eps, params["trunk_min_height"], n_jobs
     )
