@@ -35,7 +35,7 @@ caches, the classifiers, the bag-of-features loop, the bookkeeping) of
 
 Usage::
 
-    python benchmarks/bench_papers.py            # about 20 minutes on 2 shared cores
+    python benchmarks/bench_papers.py            # about 25 minutes on 2 shared cores
     python benchmarks/bench_papers.py --quick    # 2 vocabularies, 3 draws
 
 One 5-fold cross-validation by default (``--repeats 1``), as in He et al.: on two
