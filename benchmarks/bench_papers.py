@@ -346,7 +346,8 @@ def write_text(res, path):
     L = [
         "skpcd: the papers' experiments on simulated street objects and on DALES",
         f"machine {meta['machine']}; n_jobs={meta['n_jobs']}; total "
-        f"{meta.get('total_seconds', 0):.0f} s; {meta['cv']}",
+        f"{meta.get('total_seconds', 0):.0f} s "
+        f"(per run of --experiments: {meta.get('run_seconds', {})}); {meta['cv']}",
         "accuracy in %, mean ± std over the folds",
         "",
         "simulated objects (make_street_objects, mobile): "
@@ -489,7 +490,11 @@ def main(argv=None):
 
     def save():
         res["meta"]["descriptor_seconds"] = {k: round(v, 2) for k, v in timings.items()}
-        res["meta"]["total_seconds"] = round(time.perf_counter() - t0, 1)
+        took = round(time.perf_counter() - t0, 1)
+        res["meta"].setdefault("run_seconds", {})[",".join(todo)] = took
+        res["meta"]["total_seconds"] = round(
+            sum(res["meta"]["run_seconds"].values()), 1
+        )
         Path(out).parent.mkdir(parents=True, exist_ok=True)
         Path(out).write_text(json.dumps(res, indent=1, default=bi._json_default))
         write_text(res, Path(out).with_suffix(".txt"))
