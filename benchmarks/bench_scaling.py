@@ -346,7 +346,9 @@ def _run_scene(spec):
         cluster.run(_warm_scene)
         base_workers = cluster.run(_worker_reset)
         base_driver = _worker_reset()
+        # the tiled path takes an SMRF preset and no structures (issue 19)
         kwargs = {"random_state": 0, "n_jobs": N_JOBS}
+        kwargs.update(ground="aerial", structures=False)
         if spec.get("eps"):
             kwargs["eps"] = spec["eps"]
         t0 = time.perf_counter()
