@@ -49,6 +49,19 @@ def _cell_xyz(key, ny, nz):
     return key // (nz * ny), (key // nz) % ny, key % nz
 
 
+@njit(cache=True, nogil=True, inline="always")
+def borrow_grid(grid):
+    """The arrays of ``grid`` (a VoxelGrid), each borrowed
+    (:func:`~skpcd.utils._numba.borrow`), in the grid's field order. The
+    kernel that calls it holds ``grid`` to its end: the views cannot
+    outlive their owner. Inlined."""
+    return (
+        borrow(grid.xs), borrow(grid.order), borrow(grid.cell_cloud),
+        borrow(grid.cell_key), borrow(grid.cell_start), borrow(grid.cloud_cells),
+        borrow(grid.origin), borrow(grid.h), borrow(grid.dims),
+    )  # fmt: skip
+
+
 @njit(cache=True, nogil=True)
 def cell_keys(xyz, cloud_ptr, origin, h, dims, keys):
     """Key of every point's cell within its cloud, into ``keys``."""
@@ -267,15 +280,9 @@ def knn_cells(lo, hi, cells, grid, indptr, max_shell, todo, indices, sqdist, har
     inlined helpers that take them cost no atomic reference counting.
     """
     cells = borrow(cells)
-    xs = borrow(grid.xs)
-    order = borrow(grid.order)
-    cell_cloud = borrow(grid.cell_cloud)
-    cell_key = borrow(grid.cell_key)
-    cell_start = borrow(grid.cell_start)
-    cloud_cells = borrow(grid.cloud_cells)
-    origin = borrow(grid.origin)
-    h = borrow(grid.h)
-    dims = borrow(grid.dims)
+    xs, order, cell_cloud, cell_key, cell_start, cloud_cells, origin, h, dims = (
+        borrow_grid(grid)
+    )
     indptr = borrow(indptr)
     todo = borrow(todo)
     indices = borrow(indices)
@@ -494,13 +501,9 @@ def _ball(
     it (:func:`~skpcd.preprocessing._normals_kernels.ball_normals`)."""
     fill = len(indptr) > 0 or with_sink
     sort = sort or with_sink
-    xs = borrow(grid.xs)
-    order = borrow(grid.order)
-    cell_cloud = borrow(grid.cell_cloud)
-    cell_key = borrow(grid.cell_key)
-    cell_start = borrow(grid.cell_start)
-    cloud_cells = borrow(grid.cloud_cells)
-    dims = borrow(grid.dims)
+    xs, order, cell_cloud, cell_key, cell_start, cloud_cells, _o, _h, dims = (
+        borrow_grid(grid)
+    )
     indptr = borrow(indptr)
     counts = borrow(counts)
     indices = borrow(indices)

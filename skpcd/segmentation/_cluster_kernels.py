@@ -15,7 +15,7 @@ nearest core point within ``eps``. Memory is O(n_points).
 import numpy as np
 from numba import njit
 
-from skpcd.preprocessing._grid_kernels import cell_block
+from skpcd.preprocessing._grid_kernels import borrow_grid, cell_block
 from skpcd.utils._numba import borrow, keep
 
 
@@ -38,13 +38,10 @@ def union_core(lo, hi, grid, core, r2, parent):
     Threads each need a forest of their own (:func:`merge_forest` joins
     them): the links of a cell may reach any other cell's points.
     """
-    xs = borrow(grid.xs)
+    xs, _t, cell_cloud, cell_key, cell_start, cloud_cells, _o, _h, dims = borrow_grid(
+        grid
+    )
     core = borrow(core)
-    cell_cloud = borrow(grid.cell_cloud)
-    cell_key = borrow(grid.cell_key)
-    cell_start = borrow(grid.cell_start)
-    cloud_cells = borrow(grid.cloud_cells)
-    dims = borrow(grid.dims)
     parent = borrow(parent)
     i_own = np.empty(27, dtype=np.int64)
     cur = borrow(i_own[:9])
@@ -94,14 +91,10 @@ def attach_border(lo, hi, grid, core, r2, nearest):
     """For every non-core point of cells ``lo`` to ``hi``, the position of
     its nearest core point within ``sqrt(r2)`` into ``nearest`` (ties by the
     lower point index), or -1. Rows are independent: safe in threads."""
-    xs = borrow(grid.xs)
-    order = borrow(grid.order)
+    xs, order, cell_cloud, cell_key, cell_start, cloud_cells, _o, _h, dims = (
+        borrow_grid(grid)
+    )
     core = borrow(core)
-    cell_cloud = borrow(grid.cell_cloud)
-    cell_key = borrow(grid.cell_key)
-    cell_start = borrow(grid.cell_start)
-    cloud_cells = borrow(grid.cloud_cells)
-    dims = borrow(grid.dims)
     nearest = borrow(nearest)
     i_own = np.empty(27, dtype=np.int64)
     cur = borrow(i_own[:9])
