@@ -559,10 +559,10 @@ def test_auto_groups_are_deterministic_with_random_state():
 def test_auto_groups_use_the_given_cv_splits():
     X, y = _confused_blobs()
     cv = list(StratifiedKFold(4).split(X, y))
-    clf = TwoStepClassifier(LogisticRegression(), groups="auto", cv=cv).fit(X, y)
+    clf = TwoStepClassifier(KNeighborsClassifier(5), groups="auto", cv=cv).fit(X, y)
     from sklearn.model_selection import cross_val_predict
 
-    pred = cross_val_predict(LogisticRegression(), X, y, cv=cv)
+    pred = cross_val_predict(KNeighborsClassifier(5), X, y, cv=cv)
     expected = np.array(
         [[np.mean(pred[y == i] == j) for j in range(4)] for i in range(4)]
     )
@@ -584,7 +584,7 @@ def test_grid_search_tunes_the_group_threshold():
     X, y = _confused_blobs()
     cv = StratifiedKFold(2, shuffle=True, random_state=0)
     search = GridSearchCV(
-        TwoStepClassifier(LogisticRegression(), groups="auto", random_state=0),
+        TwoStepClassifier(KNeighborsClassifier(5), groups="auto", random_state=0),
         {"group_threshold": [0.2, 1.0]},
         cv=cv,
     ).fit(X, y)
@@ -592,7 +592,7 @@ def test_grid_search_tunes_the_group_threshold():
         search.best_estimator_.group_threshold == search.best_params_["group_threshold"]
     )
     # threshold 1 is the one-step classifier, fold for fold
-    one_step = cross_val_score(LogisticRegression(), X, y, cv=cv).mean()
+    one_step = cross_val_score(KNeighborsClassifier(5), X, y, cv=cv).mean()
     assert search.cv_results_["mean_test_score"][1] == pytest.approx(one_step)
 
 
