@@ -22,6 +22,7 @@ from skpcd.cli._common import (
     unique_counts,
 )
 
+KINDS = ("object", "facade", "wire")
 SEGMENT_FORMATS = ("ply", "pcd", "las", "laz", "xyz", "txt", "csv", "npy")
 
 # points of the segments predicted at a time by identify (memory bound)
@@ -193,17 +194,17 @@ def segment_file(args, command, fields=None):
             f"scene     {args.scene}: {len(labels)} points, "
             f"{int(result.ground.sum())} ground"
         )
-        kinds = result.kinds if result.kinds is not None else []
-        typed = ", ".join(
-            f"{int((kinds == k).sum())} {k}" for k in ("facade", "wire") if len(kinds)
-        )
         print(
-            f"segments  {result.n_segments} ({args.method}, eps {result.eps:.3f}"
-            + (f"; {typed}" if typed else "")
-            + "); "
+            f"segments  {result.n_segments} ({args.method}, eps {result.eps:.3f}); "
             f"{int(((labels < 0) & ~result.ground).sum())} points in none "
             f"({time.perf_counter() - start:.1f} s)"
         )
+        kinds = np.asarray(result.kinds if result.kinds is not None else [])
+        if (kinds != "object").any():
+            print(
+                "types     "
+                + ", ".join(f"{int((kinds == k).sum())} {k}" for k in KINDS)
+            )
     return points, extras, result
 
 

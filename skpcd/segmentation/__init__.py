@@ -1,9 +1,12 @@
 """Scene segmentation: ground removal, DBSCAN with automatic eps, Euclidean clusters.
 
-A scene becomes object segments in three steps: :class:`GroundFilter`
-removes the terrain, :class:`AutoEpsDBSCAN` or :class:`EuclideanClusters`
-cluster the rest, and :func:`segment_scene` chains them with a segment-size
-range, in memory or tile by tile (:func:`tile_scene`) for scans larger than
+A scene becomes object segments in a few steps: :class:`GroundFilter`
+removes the terrain (the cloth simulation filter by default, or SMRF),
+facades and overhead wires are taken out as segments of their own,
+:class:`AutoEpsDBSCAN` or :class:`EuclideanClusters` cluster the rest and
+clusters holding several vertical trunks are split; :func:`segment_scene`
+chains them with a segment-size range, in memory or, with an SMRF preset
+and no structures, tile by tile (:func:`tile_scene`) for scans larger than
 memory.
 """
 

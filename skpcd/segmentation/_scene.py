@@ -191,8 +191,8 @@ def segment_scene(
         neighbourhoods and horizontal spread across it;
         ``trunk_min_height`` (1.2), the shortest vertical trunk that seeds a
         split; ``n_neighbors`` (12), the neighbours of the local shape.
-        False clusters every non-ground point alike (as before version
-        0.19). Not with ``tile_size`` (a ValueError).
+        False clusters every non-ground point alike (the earlier pipeline).
+        Not with ``tile_size`` (a ValueError).
 
     Returns
     -------
