@@ -114,6 +114,10 @@ def main():
     parser.add_argument("--data", default=DEFAULT_DATA)
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--cases", default=",".join(CASES), help="comma-separated")
+    parser.add_argument(
+        "--variants", default=",".join(VARIANTS), help="comma-separated"
+    )
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
@@ -126,8 +130,8 @@ def main():
         np.savez(data, *clouds)
         print(f"{len(clouds)} clouds, {n_points} points, {args.threads} threads")
         print(f"{'case':<16}{'variant':<16}{'peak MiB':>10}{'wall s':>9}")
-        for case in CASES:
-            for variant in VARIANTS:
+        for case in args.cases.split(","):
+            for variant in args.variants.split(","):
                 if variant == "normals kept" and not case.startswith("fpfh"):
                     continue
                 spec = {"case": case, "variant": variant, "data": data}
