@@ -132,22 +132,62 @@ def neighbour_share(indptr, indices, flag, out):
 
 
 @njit(cache=True, nogil=True)
-def aligned_edges(indptr, indices, mask, normal, min_cos, keep):
-    """``keep[j]`` for every pair ``(i, indices[j])`` of the k-NN graph: both
-    points masked and their normals within ``acos(min_cos)`` (either
-    sign)."""
-    for i in range(len(indptr) - 1):
+def _find(parent, i):
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@njit(cache=True, nogil=True)
+def aligned_components(indptr, indices, mask, normal, min_cos, labels):
+    """Connected components of the masked points over the k-NN graph, an
+    edge kept where the two normals are within ``acos(min_cos)`` (either
+    sign); union-find, no graph built. ``labels``: the component of each
+    masked point, numbered 0, 1, ... in order of first point; -1 elsewhere.
+    Returns the number of components."""
+    n = len(indptr) - 1
+    parent = np.arange(n)
+    for i in range(n):
+        if not mask[i]:
+            continue
         for j in range(indptr[i], indptr[i + 1]):
             k = indices[j]
-            keep[j] = False
-            if k == i or not mask[i] or not mask[k]:
+            if k == i or not mask[k]:
                 continue
             d = (
                 normal[i, 0] * normal[k, 0]
                 + normal[i, 1] * normal[k, 1]
                 + normal[i, 2] * normal[k, 2]
             )
-            keep[j] = abs(d) >= min_cos
+            if abs(d) >= min_cos:
+                a, b = _find(parent, i), _find(parent, k)
+                if a != b:
+                    if a < b:
+                        parent[b] = a
+                    else:
+                        parent[a] = b
+    count = 0
+    for i in range(n):
+        labels[i] = -1
+    for i in range(n):
+        if mask[i]:
+            r = _find(parent, i)
+            if labels[r] < 0:
+                labels[r] = count
+                count += 1
+            labels[i] = labels[r]
+    return count
+
+
+@njit(cache=True, nogil=True)
+def same_label_edges(indptr, indices, labels, mask, keep):
+    """``keep[j]`` for every pair ``(i, indices[j])`` of the k-NN graph: both
+    ends masked, with the same label, and not the point itself."""
+    for i in range(len(indptr) - 1):
+        for j in range(indptr[i], indptr[i + 1]):
+            k = indices[j]
+            keep[j] = k != i and mask[i] and mask[k] and labels[i] == labels[k]
 
 
 @njit(cache=True, nogil=True)

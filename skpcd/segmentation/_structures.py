@@ -173,30 +173,28 @@ def local_shapes(xyz, nb):
     return out
 
 
+def _csr(nb, keep, data):
+    """The k-NN graph's pairs with ``keep``, as a sparse matrix built
+    directly in CSR form (no COO copy: about 5 bytes per edge kept)."""
+    from scipy.sparse import csr_array
+
+    n = len(nb.indptr) - 1
+    counts = np.add.reduceat(keep.astype(np.int64), nb.indptr[:-1])
+    counts[np.diff(nb.indptr) == 0] = 0
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(counts, out=indptr[1:])
+    return csr_array((data, nb.indices[keep], indptr), shape=(n, n))
+
+
 def _regions(nb, mask, normal):
     """Connected regions of the masked points over the k-NN graph, joined
     only where the normals agree within ``_NORMAL_ANGLE``: one per smooth
     surface (a wall), none across a pole or a crown whose normals turn."""
-    from scipy.sparse import csr_array
-    from scipy.sparse.csgraph import connected_components
+    from skpcd.segmentation._structure_kernels import aligned_components
 
-    from skpcd.segmentation._structure_kernels import aligned_edges
-
-    n = len(mask)
-    keep = np.empty(len(nb.indices), dtype=bool)
-    aligned_edges(nb.indptr, nb.indices, mask, normal, _NORMAL_COS, keep)
-    rows = np.repeat(np.arange(n, dtype=np.int32), np.diff(nb.indptr))[keep]
-    graph = csr_array(
-        (np.ones(len(rows), dtype=np.int8), (rows, nb.indices[keep])), shape=(n, n)
-    )
-    del rows, keep
-    _, labels = connected_components(graph, directed=False)
-    labels = labels.astype(np.int64)
-    labels[~mask] = -1
-    # renumber the masked regions 0, 1, ...
-    inside = labels >= 0
-    _, labels[inside] = np.unique(labels[inside], return_inverse=True)
-    return labels, int(labels.max()) + 1 if inside.any() else 0
+    labels = np.empty(len(mask), dtype=np.int64)
+    n = aligned_components(nb.indptr, nb.indices, mask, normal, _NORMAL_COS, labels)
+    return labels, int(n)
 
 
 def find_structures(xyz, height, nb, eps, params, n_jobs=None):
@@ -287,7 +285,6 @@ def split_at_trunks(xyz, labels, trunks, nb):
     nearest along the k-NN graph within its cluster (by straight distance
     to the trunk's points when the graph does not reach it). Returns new
     labels (clusters renumbered) and how many clusters were split."""
-    from scipy.sparse import csr_array
     from scipy.sparse.csgraph import dijkstra
     from scipy.spatial import cKDTree
 
@@ -310,22 +307,24 @@ def split_at_trunks(xyz, labels, trunks, nb):
         return labels, 0
     inside = np.isin(labels, split)
     idx = np.flatnonzero(inside)
-    local = np.full(len(xyz), -1, dtype=np.int64)
-    local[idx] = np.arange(len(idx))
-    # edges of the k-NN graph within a cluster being split
-    rows = np.repeat(np.arange(len(xyz)), np.diff(nb.indptr))
-    cols = nb.indices.astype(np.int64)
-    keep = inside[rows] & (labels[rows] == labels[cols]) & (rows != cols)
-    rows, cols = rows[keep], cols[keep]
+    # edges of the k-NN graph within a cluster being split (the graph over
+    # all points, the others without edges)
+    from skpcd.segmentation._structure_kernels import same_label_edges
+
+    keep = np.empty(len(nb.indices), dtype=bool)
+    same_label_edges(nb.indptr, nb.indices, labels, inside, keep)
     w = np.sqrt(nb.sqdist[keep].astype(np.float64)) + 1e-6
-    graph = csr_array((w, (local[rows], local[cols])), shape=(len(idx),) * 2)
+    graph = _csr(nb, keep, w)
+    del keep, w
     seeds = np.flatnonzero(inside & (trunks >= 0) & (t_cluster[trunks] == labels))
     _, _, source = dijkstra(
-        graph, directed=False, indices=local[seeds], min_only=True,
+        graph, directed=False, indices=seeds, min_only=True,
         return_predecessors=True,
     )  # fmt: skip
-    seed_trunk = np.full(len(idx), -1, dtype=np.int64)
-    seed_trunk[local[seeds]] = trunks[seeds]
+    del graph
+    source = source[idx]
+    seed_trunk = np.full(len(xyz), -1, dtype=np.int64)
+    seed_trunk[seeds] = trunks[seeds]
     owner = np.where(source >= 0, seed_trunk[np.maximum(source, 0)], -1)
     lost = np.flatnonzero(owner < 0)
     if len(lost):
