@@ -214,12 +214,16 @@ def segment_scene(
     shape of its ``n_neighbors`` nearest neighbours (the eigenvalues ``l1
     >= l2 >= l3`` of their covariance) and its height above the ground
     points. Facade points are planar (``(l2 - l3) / l1 >= 0.5``) with a
-    horizontal normal (``|n_z| <= 0.3``), linked (``eps`` apart) into
-    pieces at least ``facade_min_height`` tall and ``facade_min_length``
-    long, then grown twice over the points whose neighbours are mostly
-    facade. Wire points are linear (``(l1 - l2) / l1 >= 0.8``) with an axis
-    within 30 degrees of the horizontal, thin and ``wire_min_height`` above
-    the ground, linked into pieces ``wire_min_length`` long and at most
+    horizontal normal (``|n_z| <= 0.3``), joined over the k-NN graph where
+    their normals agree within 20 degrees into regions at least
+    ``facade_min_height`` tall and ``facade_min_length`` long; the planar
+    vertical points linked (``eps`` apart) to such a region, the points
+    whose neighbours are mostly facade (twice) and the clusters of mostly
+    planar points touching a facade join it. Wire points are linear
+    (``(l1 - l2) / l1 >= 0.8``) with an axis within 30 degrees of the
+    horizontal, thin, ``wire_min_height`` above the ground and hanging free
+    (at most 3 points 0.3 to 2 m above or below in their 0.5 m column),
+    linked into pieces ``wire_min_length`` long and at most
     ``wire_max_width`` wide. The facade and wire pieces are segments of
     kind "facade" and "wire"; the other points are clustered. Trunk points
     are linear and vertical (axis within 32 degrees of the vertical)
