@@ -181,9 +181,9 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
         ``random_state`` is None) and the approximate index. Pass an int for
         reproducible results.
     n_jobs : int, default=None
-        Threads for the clustering, the word assignment and the approximate
-        index; None means 1, -1 all cores. The output does not depend on
-        it. Under a backend chosen with :func:`joblib.parallel_config`
+        Threads for the clustering and the exact word assignment (the
+        approximate queries run on one thread); None means 1, -1 all
+        cores. The output does not depend on it. Under a backend chosen with :func:`joblib.parallel_config`
         (e.g. ``"dask"``), the word counts are computed in batches of
         clouds (a descriptor counts as a point), run at once (None: the
         backend's), each on the cores left to its task.
@@ -235,9 +235,10 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
     threshold exact assignment is both faster and exact. Ties go to the
     lower word index.
 
-    With ``assignment="approximate"`` and ``n_jobs > 1`` the queries run in
-    numba's parallel threads: do not call :meth:`transform` of one fitted
-    instance from several threads at once.
+    The approximate queries run on one thread (pynndescent's parallel batch
+    search shares one random state between its threads, so its answers
+    would depend on ``n_jobs``); the clustering and the exact assignment
+    use ``n_jobs`` threads.
 
     The encoding follows He et al. [2]_ (section 3.2.2): k-means over the
     PFH of every point (k = 6 neighbours, 125 bins), then the count of the
@@ -393,7 +394,10 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
             n_neighbors=min(30, max(len(words) - 1, 1)),
             random_state=seed,
             n_jobs=1,  # one thread: the graph does not depend on n_jobs
-            parallel_batch_queries=True,
+            # serial queries: pynndescent's parallel batch search shares one
+            # random state between its threads (candidates drawn to fill a
+            # small leaf), so its answers would depend on the thread count
+            parallel_batch_queries=False,
         )
         index.prepare()
         return index
@@ -407,22 +411,15 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
                     block.astype(self.vocabulary_.dtype, copy=False),
                     self.vocabulary_,
                 )
-        import numba
-
         k = min(self._QUERY_K, len(self.vocabulary_))
-        before = numba.get_num_threads()
-        numba.set_num_threads(min(n_threads, numba.config.NUMBA_NUM_THREADS))
-        try:
-            if getattr(self, "_index", None) is None:  # unpickled: rebuilt once
-                self._index = self._build_index(self._index_seed)
-            indices = self._index.query(
-                np.ascontiguousarray(block, dtype=np.float32),
-                k=k,
-                epsilon=self._QUERY_EPSILON,
-                return_distances=False,
-            )
-        finally:
-            numba.set_num_threads(before)
+        if getattr(self, "_index", None) is None:  # unpickled: rebuilt once
+            self._index = self._build_index(self._index_seed)
+        indices = self._index.query(
+            np.ascontiguousarray(block, dtype=np.float32),
+            k=k,
+            epsilon=self._QUERY_EPSILON,
+            return_distances=False,
+        )
         return indices[:, 0].astype(np.intp)
 
     def _counts(self, descs):
