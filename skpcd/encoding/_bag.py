@@ -183,10 +183,11 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
     n_jobs : int, default=None
         Threads for the clustering and the exact word assignment (the
         approximate queries run on one thread); None means 1, -1 all
-        cores. The output does not depend on it. Under a backend chosen with :func:`joblib.parallel_config`
-        (e.g. ``"dask"``), the word counts are computed in batches of
-        clouds (a descriptor counts as a point), run at once (None: the
-        backend's), each on the cores left to its task.
+        cores. The output does not depend on it. Under a backend chosen
+        with :func:`joblib.parallel_config` (e.g. ``"dask"``), the word
+        counts are computed in batches of clouds (a descriptor counts as a
+        point), run at once (None: the backend's), each on the cores left
+        to its task.
 
     Attributes
     ----------
