@@ -181,12 +181,13 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
         ``random_state`` is None) and the approximate index. Pass an int for
         reproducible results.
     n_jobs : int, default=None
-        Threads for the clustering, the word assignment and the approximate
-        index; None means 1, -1 all cores. The output does not depend on
-        it. Under a backend chosen with :func:`joblib.parallel_config`
-        (e.g. ``"dask"``), the word counts are computed in batches of
-        clouds (a descriptor counts as a point), run at once (None: the
-        backend's), each on the cores left to its task.
+        Threads for the exact word assignment (the clustering and the
+        approximate queries run on one thread, so that the output does not
+        depend on the thread count); None means 1, -1 all cores. Under a
+        backend chosen with :func:`joblib.parallel_config` (e.g.
+        ``"dask"``), the word counts are computed in batches of clouds (a
+        descriptor counts as a point), run at once (None: the backend's),
+        each on the cores left to its task.
 
     Attributes
     ----------
@@ -235,9 +236,12 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
     threshold exact assignment is both faster and exact. Ties go to the
     lower word index.
 
-    With ``assignment="approximate"`` and ``n_jobs > 1`` the queries run in
-    numba's parallel threads: do not call :meth:`transform` of one fitted
-    instance from several threads at once.
+    The clustering runs on one thread (scikit-learn's k-means sums the
+    partial centres of its threads in an order that depends on their
+    number: the vocabulary would differ in its last bits with ``n_jobs``),
+    and so do the approximate queries (pynndescent's parallel batch search
+    shares one random state between its threads); the exact assignment
+    uses ``n_jobs`` threads.
 
     The encoding follows He et al. [2]_ (section 3.2.2): k-means over the
     PFH of every point (k = 6 neighbours, 125 bins), then the count of the
@@ -284,9 +288,11 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
 
     # "auto" assignment is approximate from this many words on.
     _APPROXIMATE_MIN_WORDS = 2048
-    # Approximate queries: the nearest of k words found, searched with epsilon.
+    # Approximate queries: the nearest of k words found, searched with epsilon
+    # (0.2: 99.5 % of 3000 real PFH (k=6) get the exact word among 300, 98.0 %
+    # with 0.1, for 15 % more query time).
     _QUERY_K = 4
-    _QUERY_EPSILON = 0.1
+    _QUERY_EPSILON = 0.2
 
     def __init__(
         self,
@@ -359,7 +365,10 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
         seed = rng.randint(np.iinfo(np.int32).max)
         if "random_state" in params and params["random_state"] is None:
             clusterer.set_params(random_state=seed)
-        with threadpool_limits(effective_threads(self.n_jobs), user_api="openmp"):
+        # one OpenMP thread: scikit-learn's k-means sums the partial centres
+        # of its threads in an order that depends on their number, so the
+        # vocabulary (and with it the words near ties) would depend on n_jobs
+        with threadpool_limits(1, user_api="openmp"):
             clusterer.fit(sample)
         centers = getattr(clusterer, "cluster_centers_", None)
         want = (self.n_words, sample.shape[1])
@@ -393,7 +402,10 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
             n_neighbors=min(30, max(len(words) - 1, 1)),
             random_state=seed,
             n_jobs=1,  # one thread: the graph does not depend on n_jobs
-            parallel_batch_queries=True,
+            # serial queries: pynndescent's parallel batch search shares one
+            # random state between its threads (candidates drawn to fill a
+            # small leaf), so its answers would depend on the thread count
+            parallel_batch_queries=False,
         )
         index.prepare()
         return index
@@ -407,22 +419,15 @@ class BagOfFeatures(ClassNamePrefixFeaturesOutMixin, TransformerMixin, BaseEstim
                     block.astype(self.vocabulary_.dtype, copy=False),
                     self.vocabulary_,
                 )
-        import numba
-
         k = min(self._QUERY_K, len(self.vocabulary_))
-        before = numba.get_num_threads()
-        numba.set_num_threads(min(n_threads, numba.config.NUMBA_NUM_THREADS))
-        try:
-            if getattr(self, "_index", None) is None:  # unpickled: rebuilt once
-                self._index = self._build_index(self._index_seed)
-            indices = self._index.query(
-                np.ascontiguousarray(block, dtype=np.float32),
-                k=k,
-                epsilon=self._QUERY_EPSILON,
-                return_distances=False,
-            )
-        finally:
-            numba.set_num_threads(before)
+        if getattr(self, "_index", None) is None:  # unpickled: rebuilt once
+            self._index = self._build_index(self._index_seed)
+        indices = self._index.query(
+            np.ascontiguousarray(block, dtype=np.float32),
+            k=k,
+            epsilon=self._QUERY_EPSILON,
+            return_distances=False,
+        )
         return indices[:, 0].astype(np.intp)
 
     def _counts(self, descs):

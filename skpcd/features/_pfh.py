@@ -26,8 +26,10 @@ from skpcd.features._pfh_kernels import (
 from skpcd.preprocessing._grid import ball_block, ball_block_normals, radius_grid
 from skpcd.preprocessing._neighbors import Neighborhoods, compute_neighborhoods
 from skpcd.preprocessing._normals import (
+    CLOUD_VIEWPOINT,
     _check_viewpoint,
     _normals_f32,
+    local_viewpoints,
     pack_neighborhoods,
 )
 from skpcd.utils import check_point_clouds
@@ -226,7 +228,7 @@ def _pfh_radius_blocked(clouds, radius, n_bins, given, viewpoint, n_threads):
     grid = radius_grid(xyz, offsets, radius, lo_hi)
     order, cell_start = grid.order, grid.cell_start
     p, origins = local_frame(xyz, offsets)  # float32, each cloud in its frame
-    viewpoints = (viewpoint - origins).astype(np.float32)
+    viewpoints = local_viewpoints(viewpoint, xyz, offsets, origins).astype(np.float32)
     del xyz
     step = max(_BLOCK, n_pts // 64)
     bounds = np.unique(np.searchsorted(cell_start, np.arange(0, n_pts, step)))
@@ -415,7 +417,7 @@ class _LocalDescriptor(CloudTransformer):
         "normals": [StrOptions(set(NORMALS_OPTIONS))],
         "normal_n_neighbors": [Interval(Integral, 3, None, closed="left"), None],
         "normal_radius": [Interval(Real, 0, None, closed="neither"), None],
-        "viewpoint": ["array-like"],
+        "viewpoint": ["array-like", StrOptions({CLOUD_VIEWPOINT})],
         "undefined": [StrOptions({"nan", "zero", "drop", "keep"})],
         "pooling": [StrOptions({"mean", "sum", "max"}), None],
         "n_jobs": [Integral, None],
@@ -454,7 +456,7 @@ class _LocalDescriptor(CloudTransformer):
             for name in ("normal_n_neighbors", "normal_radius")
             if getattr(self, name) is not None
         ]
-        if np.any(_check_viewpoint(self.viewpoint) != 0):
+        if not isinstance(_check_viewpoint(self.viewpoint), str):
             names.append("viewpoint")
         return names
 
@@ -501,7 +503,9 @@ class _LocalDescriptor(CloudTransformer):
                     n_threads=n_threads,
                     with_sqdist=False,
                 )
-            vp = _check_viewpoint(self.viewpoint) - origins
+            vp = local_viewpoints(
+                _check_viewpoint(self.viewpoint), xyz, offsets, origins
+            )
             n = _normals_f32(p, nnb, vp, n_threads, offsets)[0]
             del nnb
             if given is not None:  # "auto" on clouds with and without normals
@@ -650,12 +654,15 @@ _COMMON_PARAMS = """
     normal_radius : float, default=None
         Radius for the estimated normals instead; likewise refused with
         given normals.
-    viewpoint : tuple of 3 float, default=(0.0, 0.0, 0.0)
-        Estimated normals face this point (PCL ``setViewPoint``), a point in
-        the clouds' coordinates: for clouds at UTM coordinates the default
-        is thousands of kilometres away (pass the sensor's position; see
-        "Coordinates far from the origin" in the user guide). Given
-        normals keep their sign: another viewpoint with given normals is an
+    viewpoint : "corner" or tuple of 3 float, default="corner"
+        Estimated normals face this point (PCL ``setViewPoint``).
+        ``"corner"``: a point fixed to each cloud, below and beside it
+        (``min - (max - min) - 1`` per axis), so the descriptors do not
+        depend on where the cloud lies. Three numbers: a point in the
+        clouds' coordinates, the same for all (the sensor's position);
+        ``(0, 0, 0)``, PCL's default, gives PCL's histograms bin for bin
+        (see "Coordinates far from the origin" in the user guide). Given
+        normals keep their sign: a viewpoint with given normals is an
         error.
     undefined : {"nan", "zero", "drop", "keep"}, default="nan"
         Points whose descriptor is undefined (their normal is undefined,
@@ -738,7 +745,7 @@ class PFHTransformer(_LocalDescriptor):
         normals="auto",
         normal_n_neighbors=None,
         normal_radius=None,
-        viewpoint=(0.0, 0.0, 0.0),
+        viewpoint=CLOUD_VIEWPOINT,
         undefined="nan",
         pooling=None,
         n_jobs=None,
@@ -827,7 +834,7 @@ class FPFHTransformer(_LocalDescriptor):
         normals="auto",
         normal_n_neighbors=None,
         normal_radius=None,
-        viewpoint=(0.0, 0.0, 0.0),
+        viewpoint=CLOUD_VIEWPOINT,
         undefined="nan",
         pooling=None,
         convention="pcl",

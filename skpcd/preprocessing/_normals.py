@@ -4,7 +4,7 @@ import typing
 from numbers import Integral, Real
 
 import numpy as np
-from sklearn.utils._param_validation import Interval
+from sklearn.utils._param_validation import Interval, StrOptions
 
 from skpcd.preprocessing._neighbors import (
     compute_neighborhoods,
@@ -14,16 +14,70 @@ from skpcd.preprocessing._normals_kernels import normals_rows
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
 from skpcd.utils._parallel import effective_threads, parallel_rows
-from skpcd.utils._validation import local_frame
+from skpcd.utils._validation import cloud_bounds, local_frame
 
 __all__ = ["NormalEstimator", "estimate_normals"]
 
 
+#: The default viewpoint: a point fixed to each cloud, outside it (see
+#: :func:`local_viewpoints`), so that estimated normals, and the descriptors
+#: built on them, do not depend on where the cloud lies.
+CLOUD_VIEWPOINT = "corner"
+
+
 def _check_viewpoint(viewpoint):
+    """``CLOUD_VIEWPOINT`` or 3 finite numbers as a float64 array."""
+    if isinstance(viewpoint, str):
+        if viewpoint != CLOUD_VIEWPOINT:
+            raise ValueError(
+                f"viewpoint must be {CLOUD_VIEWPOINT!r} or 3 finite numbers, "
+                f"got {viewpoint!r}"
+            )
+        return viewpoint
     vp = np.asarray(viewpoint, dtype=np.float64)
     if vp.shape != (3,) or not np.isfinite(vp).all():
-        raise ValueError(f"viewpoint must be 3 finite numbers, got {viewpoint!r}")
+        raise ValueError(
+            f"viewpoint must be {CLOUD_VIEWPOINT!r} or 3 finite numbers, "
+            f"got {viewpoint!r}"
+        )
     return vp
+
+
+def local_viewpoints(viewpoint, xyz, cloud_ptr, origins):
+    """The viewpoint of every cloud in its local frame.
+
+    ``"corner"`` is a point fixed to each cloud: its lower corner moved out
+    by the cloud's own extent and 1 m more, ``lo - (hi - lo) - 1`` per axis
+    (below the cloud and beside it, as a sensor is, and never on a plane
+    the cloud lies in). A cloud and its translates get the same normals.
+    Chosen by cross-validation on the DALES objects among PCL's origin, the
+    centroid, a point above the cloud, the lower corner and this point: a
+    random forest on mean-pooled PFH scored 0.887 / 0.922 / 0.910 / 0.937
+    / 0.942 and on FPFH 0.807 / 0.885 / 0.857 / 0.907 / 0.905 (5 folds).
+    Three numbers are a point in the clouds' coordinates (PCL's
+    ``setViewPoint``), the same for all clouds.
+
+    Parameters
+    ----------
+    viewpoint : "corner" or ndarray of shape (3,)
+        As checked by ``_check_viewpoint``.
+    xyz : ndarray of shape (n_points, 3), float64
+        The packed clouds, in their own coordinates.
+    cloud_ptr : ndarray of shape (n_clouds + 1,), int64
+        Offsets of the clouds.
+    origins : ndarray of shape (n_clouds, 3), float64
+        The origins of the clouds' local frames
+        (:func:`~skpcd.utils._validation.local_frame`).
+
+    Returns
+    -------
+    viewpoints : ndarray of shape (n_clouds, 3), float64
+        Cloud ``c``'s viewpoint in its local frame.
+    """
+    if isinstance(viewpoint, str):
+        lo, hi = cloud_bounds(xyz, cloud_ptr)
+        return (lo - origins) - (hi - lo) - 1.0
+    return viewpoint - origins
 
 
 def estimate_normals(
@@ -31,7 +85,7 @@ def estimate_normals(
     *,
     n_neighbors=None,
     radius=None,
-    viewpoint=(0.0, 0.0, 0.0),
+    viewpoint=CLOUD_VIEWPOINT,
     neighborhoods=None,
     n_jobs=None,
 ):
@@ -51,10 +105,13 @@ def estimate_normals(
         ``setKSearch``). Give this or ``radius`` or ``neighborhoods``.
     radius : float, default=None
         Radius for a radius search (PCL ``setRadiusSearch``).
-    viewpoint : array-like of shape (3,), default=(0, 0, 0)
+    viewpoint : "corner" or array-like of shape (3,), default="corner"
         Normals are flipped so that ``(viewpoint - p) . n >= 0`` (PCL
-        ``setViewPoint``; its default is the sensor origin, (0, 0, 0) for
-        clouds without one).
+        ``setViewPoint``). ``"corner"``: a point fixed to the cloud, outside
+        it below its lower corner (``min - (max - min) - 1`` per axis), so
+        the normals do not depend on where the cloud lies. Three numbers: a
+        point in the cloud's coordinates; PCL's default is (0, 0, 0), which
+        gives PCL's normals bin for bin.
     neighborhoods : Neighborhoods, default=None
         Precomputed neighbourhoods (from
         :func:`~skpcd.preprocessing.compute_neighborhoods`), to share one
@@ -120,9 +177,8 @@ def _normals_packed(xyz, offsets, neighborhoods, viewpoint, n_threads):
     """Kernel call on packed float64 arrays (one or many clouds, global
     indices), each cloud in its local frame."""
     p, origins = local_frame(xyz, offsets)
-    normals, curvature = _normals_f32(
-        p, neighborhoods, viewpoint - origins, n_threads, offsets
-    )
+    vp = local_viewpoints(viewpoint, xyz, offsets, origins)
+    normals, curvature = _normals_f32(p, neighborhoods, vp, n_threads, offsets)
     return normals.astype(np.float64), curvature.astype(np.float64)
 
 
@@ -180,9 +236,12 @@ class NormalEstimator(CloudTransformer):
         ``setKSearch``, Open3D ``max_nn``). Ignored when ``radius`` is set.
     radius : float, default=None
         Radius search instead of k-NN (PCL ``setRadiusSearch``).
-    viewpoint : tuple of 3 float, default=(0.0, 0.0, 0.0)
-        Normals face this point (PCL ``setViewPoint``), in the clouds'
-        coordinates: far from clouds at UTM coordinates by default.
+    viewpoint : "corner" or tuple of 3 float, default="corner"
+        Normals face this point (PCL ``setViewPoint``). ``"corner"``: a
+        point fixed to each cloud, below and beside it (``min - (max - min)
+        - 1`` per axis), so the normals do not depend on where the cloud
+        lies. Three numbers: a point in the clouds' coordinates, the same
+        for all; ``(0, 0, 0)`` is PCL's default.
     include_curvature : bool, default=False
         Also append the curvature as column 6.
     n_jobs : int, default=None
@@ -212,7 +271,7 @@ class NormalEstimator(CloudTransformer):
     _parameter_constraints: typing.ClassVar[dict] = {
         "n_neighbors": [Interval(Integral, 1, None, closed="left")],
         "radius": [Interval(Real, 0, None, closed="neither"), None],
-        "viewpoint": ["array-like"],
+        "viewpoint": ["array-like", StrOptions({CLOUD_VIEWPOINT})],
         "include_curvature": ["boolean"],
         "n_jobs": [Integral, None],
     }
@@ -222,7 +281,7 @@ class NormalEstimator(CloudTransformer):
         n_neighbors=10,
         *,
         radius=None,
-        viewpoint=(0.0, 0.0, 0.0),
+        viewpoint=CLOUD_VIEWPOINT,
         include_curvature=False,
         n_jobs=None,
     ):

@@ -42,9 +42,12 @@ POOLED_TOLERANCE = 1.5
 
 
 def _pooled_local_descriptors(offset):
-    """PFH, FPFH and improved PFH, their viewpoint moved with the cloud."""
+    """PFH, FPFH and improved PFH: with the default viewpoint, fixed to each
+    cloud, and with a viewpoint moved with the cloud."""
     vp = tuple(float(v) for v in offset)
     return (
+        PFHTransformer(n_neighbors=10, pooling="mean"),
+        FPFHTransformer(n_neighbors=10, pooling="mean"),
         PFHTransformer(n_neighbors=10, pooling="mean", viewpoint=vp),
         FPFHTransformer(n_neighbors=10, pooling="mean", viewpoint=vp),
         ImprovedPFHTransformer(),
@@ -93,7 +96,12 @@ def _clouds(dyadic):
 
 
 def _estimators(vp):
+    """Every estimator that sees coordinates; the first three with the
+    default viewpoint, fixed to each cloud, the next with ``vp``."""
     return [
+        PFHTransformer(n_neighbors=10),
+        FPFHTransformer(radius=1.0),
+        NormalEstimator(),
         PFHTransformer(n_neighbors=10, viewpoint=vp),
         PFHTransformer(radius=1.0, viewpoint=vp),
         FPFHTransformer(n_neighbors=10, viewpoint=vp),
@@ -173,20 +181,43 @@ def test_any_translate_up_to_1e7_stays_within_the_documented_tolerance(offset):
 
 
 def test_the_viewpoint_is_a_point_in_the_clouds_coordinates():
-    """Estimated normals face the viewpoint wherever the cloud lies (PCL's
-    rule): a cloud at UTM coordinates with the default (0, 0, 0) is oriented
-    towards a point 4.2e6 away, as PCL would orient it in exact arithmetic;
-    the descriptors are translation invariant when the viewpoint moves with
-    the cloud."""
+    """Estimated normals face a viewpoint given as three numbers wherever the
+    cloud lies (PCL's rule): a cloud at UTM coordinates with PCL's (0, 0, 0)
+    is oriented towards a point 4.2e6 away, as PCL would orient it in exact
+    arithmetic; the normals are translation invariant when the viewpoint
+    moves with the cloud."""
     cloud = _clouds(True)[0]
     far = cloud + UTM
-    n_far = estimate_normals(far, n_neighbors=10)[0]
+    origin = (0.0, 0.0, 0.0)
+    n_far = estimate_normals(far, n_neighbors=10, viewpoint=origin)[0]
     n_ref = estimate_normals(cloud, n_neighbors=10, viewpoint=-UTM)[0]
     # (equal signs: no normal here is within float32 rounding of
     # perpendicular to the direction of the viewpoint)
     np.testing.assert_array_equal(n_far, n_ref)
     n_moved = estimate_normals(far, n_neighbors=10, viewpoint=UTM)[0]
-    np.testing.assert_array_equal(n_moved, estimate_normals(cloud, n_neighbors=10)[0])
+    n_origin = estimate_normals(cloud, n_neighbors=10, viewpoint=origin)[0]
+    np.testing.assert_array_equal(n_moved, n_origin)
+
+
+def test_the_default_viewpoint_moves_with_the_cloud():
+    """The default viewpoint ("corner") is fixed to each cloud: the normals
+    of a cloud and of its translate are the same, bit for bit, and differ
+    from those PCL's (0, 0, 0) gives at UTM coordinates; the point is
+    min - (max - min) - 1."""
+    cloud = _clouds(True)[0]
+    far = cloud + UTM
+    n = estimate_normals(cloud, n_neighbors=10)[0]
+    np.testing.assert_array_equal(estimate_normals(far, n_neighbors=10)[0], n)
+    lo, hi = cloud.min(axis=0), cloud.max(axis=0)
+    point = lo - (hi - lo) - 1.0
+    same = estimate_normals(cloud, n_neighbors=10, viewpoint=point)[0]
+    np.testing.assert_array_equal(n, same)
+    fixed = estimate_normals(far, n_neighbors=10, viewpoint=(0.0, 0.0, 0.0))[0]
+    assert not np.array_equal(np.sign(fixed), np.sign(n))
+    for t in (PFHTransformer(n_neighbors=10), FPFHTransformer(n_neighbors=10)):
+        np.testing.assert_array_equal(
+            t.fit_transform([far])[0], t.fit_transform([cloud])[0]
+        )
 
 
 def test_function_forms_far_from_the_origin():
@@ -211,13 +242,20 @@ def test_several_clouds_each_in_its_own_frame():
     clouds = _clouds(True)[:4]
     shifts = [np.zeros(3), UTM, -3 * UTM, np.array([0.0, 0.0, 2e6])]
     mixed = [c + s for c, s in zip(clouds, shifts)]
+    origin = (0.0, 0.0, 0.0)
     for t in (
         PFHTransformer(radius=1.0),  # normals estimated in the radius search
         PFHTransformer(n_neighbors=10),
         FPFHTransformer(n_neighbors=10),
+        PFHTransformer(radius=1.0, viewpoint=origin),
+        PFHTransformer(n_neighbors=10, viewpoint=origin),
+        FPFHTransformer(n_neighbors=10, viewpoint=origin),
     ):
         for c, s, got in zip(clouds, shifts, t.fit_transform(mixed)):
-            alone = clone(t).set_params(viewpoint=tuple(-s)).fit_transform([c])[0]
+            alone = clone(t)
+            if t.viewpoint == origin:  # a point in space: moved with the cloud
+                alone.set_params(viewpoint=tuple(-s))
+            alone = alone.fit_transform([c])[0]
             np.testing.assert_array_equal(got, alone, err_msg=repr(t))
 
 

@@ -47,7 +47,8 @@ def test_bit_exact_given_pcl_normals_and_neighbours(name):
 @pytest.mark.parametrize("name", FIXTURES)
 def test_normals_bit_exact_given_pcl_neighbours(name):
     z, nb, _ = _load(name)
-    normals, curvature = estimate_normals(z["points"], neighborhoods=nb)
+    vp = z["viewpoint"].astype(np.float64)  # PCL's default, (0, 0, 0)
+    normals, curvature = estimate_normals(z["points"], neighborhoods=nb, viewpoint=vp)
     np.testing.assert_array_equal(normals.astype(np.float32), z["normals"])
     np.testing.assert_array_equal(curvature.astype(np.float32), z["curvature"])
 
@@ -55,7 +56,9 @@ def test_normals_bit_exact_given_pcl_neighbours(name):
 @pytest.mark.parametrize("name", FIXTURES)
 def test_normals_close_to_pcl_with_own_search(name):
     z, _, search = _load(name)
-    normals, curvature = estimate_normals(z["points"].astype(np.float64), **search)
+    vp = z["viewpoint"].astype(np.float64)
+    xyz = z["points"].astype(np.float64)
+    normals, curvature = estimate_normals(xyz, **search, viewpoint=vp)
     ours, theirs = np.isnan(normals).any(axis=1), np.isnan(z["normals"]).any(axis=1)
     # NaN where PCL has NaN (fewer than 3 neighbours or collinear neighbourhoods)
     assert (ours == theirs).mean() > 0.99
@@ -70,7 +73,8 @@ def test_end_to_end_close_to_pcl(name):
     z, _, search = _load(name)
     X = [z["points"].astype(np.float64)]
     for cls, ref in ((PFHTransformer, z["pfh"]), (FPFHTransformer, z["fpfh"])):
-        ours = cls(**search, undefined="keep").fit_transform(X)[0]
+        vp = tuple(z["viewpoint"].astype(np.float64))
+        ours = cls(**search, viewpoint=vp, undefined="keep").fit_transform(X)[0]
         l1 = np.abs(ours - ref).sum(axis=1)
         # neighbour ties (1 cm quantisation) and last-bit normal differences flip
         # a few pairs; see the user guide

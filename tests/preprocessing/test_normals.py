@@ -52,7 +52,7 @@ def test_sphere_normals_are_radial():
     rng = np.random.default_rng(0)
     d = rng.normal(size=(2000, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    normals, _ = estimate_normals(5 * d, n_neighbors=15)
+    normals, _ = estimate_normals(5 * d, n_neighbors=15, viewpoint=(0, 0, 0))
     # viewpoint at the centre: normals point inwards
     assert np.min(np.sum(normals * -d, axis=1)) > 0.99
 
@@ -76,6 +76,8 @@ def test_argument_errors():
         estimate_normals(pts, n_neighbors=3, radius=1.0)
     with pytest.raises(ValueError, match="viewpoint"):
         estimate_normals(pts, n_neighbors=3, viewpoint=(0, 0))
+    with pytest.raises(ValueError, match="viewpoint must be 'corner'"):
+        estimate_normals(pts, n_neighbors=3, viewpoint="centre")
     nb = compute_neighborhoods(pts[:5], n_neighbors=3)
     with pytest.raises(ValueError, match="cover 5 points"):
         estimate_normals(pts, neighborhoods=nb)
