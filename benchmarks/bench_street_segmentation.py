@@ -310,11 +310,11 @@ def _cap():
     resource.setrlimit(resource.RLIMIT_AS, (lim, lim))
 
 
-def timing(sizes, path):
+def timing(sizes, path, stages=STAGES):
     out = []
     for size in sizes:
         n = int(size * 1_000_000)
-        for stage in STAGES:
+        for stage in stages:
             cmd = [sys.executable, __file__, "--worker", stage, str(n), str(path)]
             try:
                 res = subprocess.run(
@@ -404,6 +404,14 @@ def main():
     p.add_argument(
         "--out", type=Path, default=HERE / "results" / "street_segmentation.json"
     )
+    p.add_argument("--stages", nargs="*", default=list(STAGES), choices=STAGES)
+    p.add_argument(
+        "--merge",
+        type=Path,
+        default=None,
+        help="keep the results of this earlier JSON for what is not rerun "
+        "(quality, and the timing rows of the stages not in --stages)",
+    )
     p.add_argument("--worker", nargs=3, help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.worker:
@@ -427,7 +435,17 @@ def main():
                 )
                 np.save(path, s.points)
                 del s
-            results["timing"] = timing(args.sizes, path)
+            results["timing"] = timing(args.sizes, path, args.stages)
+    if args.merge:
+        old = json.loads(args.merge.read_text())
+        if "quality" not in results and "quality" in old:
+            results["quality"] = old["quality"]
+            results["quality_date"] = old["date"]
+        kept = [r for r in old.get("timing", []) if r["stage"] not in args.stages]
+        results["timing"] = sorted(
+            kept + results.get("timing", []),
+            key=lambda r: (r["points"], STAGES.index(r["stage"])),
+        )
     write(results, args.out)
 
 

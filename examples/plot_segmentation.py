@@ -3,7 +3,9 @@ Cut a scene into objects: ground removal and DBSCAN with automatic eps
 =======================================================================
 
 A scan comes as one cloud, not as objects. :func:`skpcd.segment_scene` removes the
-ground with :class:`~skpcd.segmentation.GroundFilter` (SMRF) and clusters the rest with
+ground with :class:`~skpcd.segmentation.GroundFilter` (by default the cloth simulation
+filter; the facade, wire and trunk steps find nothing to do in these scenes of separate
+objects, see :ref:`structures`) and clusters the rest with
 :class:`~skpcd.segmentation.AutoEpsDBSCAN`, whose radius comes from the curve of the
 mean k-th nearest-neighbour distance (Wang et al., 2019): a multiple (``eps_scale``,
 2.5 by default) of the distance at the curve's knee.

@@ -117,8 +117,21 @@ predicted[is_object] = model.predict(
     [grid_sample(points[m], 0.1) for m, o in zip(members, is_object) if o]
 )
 right = predicted == majority
-print(f"{seg.n_segments} segments, {right.mean():.0%} with their main class:")
-for c in np.unique(majority):
-    m = majority == c
+objects_ = is_object & (majority != "facade")
+print(
+    f"{int(objects_.sum())} object segments of object classes, "
+    f"{right[objects_].mean():.0%} identified right:"
+)
+for c in np.unique(majority[objects_]):
+    m = objects_ & (majority == c)
     print(f"  {c:18s} {int(right[m].sum())} of {int(m.sum())}")
+for c in ("facade", "wire"):
+    m = seg.kinds == c
+    print(f"{c} segments: {int(m.sum())}, {int(right[m].sum())} mostly {c}")
+fragments = is_object & (majority == "facade")
+n_frag = sum(len(members[i]) for i in np.flatnonzero(fragments))
+print(
+    f"{int(fragments.sum())} small object segments are mostly facade (rooms seen "
+    f"through windows, roof edges): {n_frag} points"
+)
 plt.show()
