@@ -3,9 +3,10 @@ Cross-validate the default identification pipeline
 ==================================================
 
 The default pipeline (:func:`skpcd.classification.make_default_pipeline`) describes
-each segment with global shape features (:class:`skpcd.features.ShapeFeatures`) beside
-its PFH averaged over its points (:class:`skpcd.features.PFHTransformer`), and
-classifies it with a random forest of 300 trees. This is what ``skpcd evaluate`` runs;
+each segment with global shape features (:class:`skpcd.features.ShapeFeatures`), its
+vertical structure (:class:`skpcd.features.VerticalProfile`) and its PFH averaged over
+its points (:class:`skpcd.features.PFHTransformer`), and classifies it with a random
+forest of 300 trees. This is what ``skpcd evaluate`` runs;
 here we cross-validate it (one 5-fold cross-validation) and draw the confusion matrix.
 
 It runs on the DALES objects where ``SKPCD_DALES_DIR`` names their folder, and on the

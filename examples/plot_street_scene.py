@@ -157,11 +157,12 @@ truth = np.array(
 # %%
 # Identify the segments
 # ---------------------
-# The default pipeline (shape features and the mean PFH of the points, a random
-# forest) is fitted on the simulated objects, both thinned to one point per 10 cm
-# cell (:func:`~skpcd.preprocessing.grid_sample`), and predicts every segment. It
-# knows the ten object classes only: segments of facades (walls, and rooms seen
-# through windows) get one of those labels and are left out of the score.
+# The default pipeline (shape features, vertical profile and the mean PFH of the
+# points, a random forest) is fitted on the simulated objects, both thinned to one
+# point per 10 cm cell (:func:`~skpcd.preprocessing.grid_sample`), and predicts
+# every segment. It knows the ten object classes only: segments of facades (walls,
+# and rooms seen through windows) get one of those labels and are left out of the
+# score.
 model = make_default_pipeline().fit([grid_sample(c, 0.1) for c in clouds], labels)
 predicted = model.predict([grid_sample(scene.points[m], 0.1) for m in members])
 known = np.isin(truth, model.classes_)
