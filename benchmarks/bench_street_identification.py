@@ -27,7 +27,7 @@ forest; the old default (shape + mean PFH k=10, random forest of 300 trees); sha
 with ``class_weight`` None and ``"balanced_subsample"``; and shape + vertical with a
 :class:`~sklearn.ensemble.HistGradientBoostingClassifier` (on
 the first repeat only, without class weights: one fit of 100 iterations x 10 classes
-costs 10-50 s on the shared 2-core machine).
+costs 10-95 s on the shared 2-core machine).
 
 Selection rule, fixed before the run: the candidate with the best macro F1 averaged
 over the five data sets, among those whose DALES accuracy is at least the old
