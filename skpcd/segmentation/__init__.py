@@ -14,10 +14,12 @@ from skpcd.segmentation._clusters import EuclideanClusters, euclidean_clusters
 from skpcd.segmentation._dbscan import AutoEpsDBSCAN, estimate_eps, plot_eps_curve
 from skpcd.segmentation._ground import GROUND_PRESETS, GroundFilter
 from skpcd.segmentation._scene import SceneSegmentation, make_scene, segment_scene
+from skpcd.segmentation._structures import STRUCTURE_DEFAULTS
 from skpcd.segmentation._tiling import TiledScene, TileGrid, tile_scene
 
 __all__ = [
     "GROUND_PRESETS",
+    "STRUCTURE_DEFAULTS",
     "AutoEpsDBSCAN",
     "EuclideanClusters",
     "GroundFilter",
