@@ -293,6 +293,15 @@ def segment_scene(
             "denoise is not available with tile_size; remove the outliers "
             "from the scan beforehand"
         )
+    if isinstance(structures, dict):
+        from skpcd.segmentation._structures import STRUCTURE_DEFAULTS
+
+        unknown = sorted(set(structures) - set(STRUCTURE_DEFAULTS))
+        if unknown:
+            raise ValueError(
+                f"unknown structures parameter(s) {unknown}; known: "
+                f"{sorted(STRUCTURE_DEFAULTS)}"
+            )
     filt = None
     if ground is not None:
         filt = (

@@ -110,6 +110,8 @@ def test_tiles_refuse_csf_and_structures():
         segment_scene(X, tile_size=10.0, structures=False)
     with pytest.raises(ValueError, match="structures=False"):
         segment_scene(X, ground="aerial", tile_size=10.0)
+    with pytest.raises(ValueError, match="unknown structures"):
+        segment_scene(X, structures={"wire_height": 5.0})
 
 
 def test_local_shape_equals_numpy():
