@@ -183,3 +183,12 @@ def test_without_structures_the_touching_objects_merge(street):
     lamp, _ = _main_segment(seg, names, "lamp")
     pole, _ = _main_segment(seg, names, "pole")
     assert tree == facade == lamp == pole  # one segment through the wire
+
+
+def test_structure_parameters_are_metres(street):
+    points, names, _ = street
+    # a facade taller than the 8 m wall: none found, the wall is an object
+    seg = segment_scene(points, structures={"facade_min_height": 9.0})
+    assert "facade" not in set(seg.kinds)
+    facade, _ = _main_segment(seg, names, "facade")
+    assert seg.kinds[facade] == "object"
