@@ -22,13 +22,16 @@ def predict_with_confidence(model, X):
     -------
     pred : ndarray of shape (n_samples,)
         ``model.predict(X)``; may hold a label outside ``classes_`` (the
-        ``"unknown"`` of a case-based model).
+        ``"unknown"`` of a case-based model or of a
+        :class:`~skpcd.classification.RejectUnknown`, such as
+        ``make_default_pipeline(unknown_threshold=0.5)``).
     kind : {"similarity", "probability"} or None
         ``"similarity"`` when the final step is a
         :class:`CaseBasedClassifier` (the best similarity over all cases,
         between -1 and 1), ``"probability"`` when the model has
-        ``predict_proba`` (the probability of the predicted class), None
-        otherwise.
+        ``predict_proba`` (the probability of the predicted class; for an
+        ``"unknown"`` answer, the best class probability, which is below
+        the model's threshold), None otherwise.
     score : ndarray of shape (n_samples,) or None
         The confidence of each answer, None when ``kind`` is None.
 
