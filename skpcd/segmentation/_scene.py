@@ -20,6 +20,7 @@ from sklearn.utils._param_validation import (
 )
 
 from skpcd.segmentation._clusters import (
+    EUCLIDEAN_EPS,
     EuclideanClusters,
     check_scene,
     filter_cluster_sizes,
@@ -428,7 +429,7 @@ def _segment_xyz(
                     .labels_
                 )
         else:
-            used = 0.2 if eps is None else float(eps)
+            used = EUCLIDEAN_EPS if eps is None else float(eps)
 
             def cluster(mask):
                 if mask.sum() < 2:
@@ -464,7 +465,7 @@ def _segment_xyz(
         used = est.eps_
         sub = est.labels_
     else:
-        used = 0.2 if eps is None else float(eps)
+        used = EUCLIDEAN_EPS if eps is None else float(eps)
         sub = (
             EuclideanClusters(eps=used, min_cluster_size=1, n_jobs=n_jobs)
             .fit(xyz[rest])
