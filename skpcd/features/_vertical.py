@@ -1,6 +1,5 @@
 """Descriptors of vertical structure: a height profile, the pole and what it carries."""
 
-import functools
 import numbers
 import typing
 
@@ -9,9 +8,7 @@ from sklearn.utils._param_validation import Interval
 
 from skpcd.features._overall import _check_size_extents
 from skpcd.features._vertical_kernels import geometric_median
-from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
-from skpcd.utils._parallel import map_batches
 
 __all__ = ["VerticalProfile", "vertical_features"]
 
@@ -233,11 +230,6 @@ def vertical_features(points, *, n_slices=10):
     )
 
 
-def _vertical_batch(clouds, n_jobs, n_slices):
-    """The features of a batch of clouds, one row each."""
-    return np.vstack([vertical_features(c, n_slices=n_slices) for c in clouds])
-
-
 class VerticalProfile(CloudTransformer):
     """Descriptors of the vertical structure of each segment.
 
@@ -355,12 +347,17 @@ class VerticalProfile(CloudTransformer):
         features : ndarray of shape (n_segments, 26 + 4 * n_slices)
             One row per segment.
         """
-        clouds = check_point_clouds(X)
+        return super().transform(X)
+
+    def _validate(self, X):
+        clouds = super()._validate(X)
         _check_size_extents(clouds)
+        return clouds
+
+    def _transform_batch(self, clouds, n_threads):
+        """:meth:`transform` of validated clouds (one batch of them)."""
         n_slices = int(self.n_slices)
-        return map_batches(
-            functools.partial(_vertical_batch, n_slices=n_slices), clouds
-        )
+        return np.vstack([vertical_features(c, n_slices=n_slices) for c in clouds])
 
     def get_feature_names_out(self, input_features=None):
         """Names of the output features.
