@@ -1,4 +1,3 @@
-import csv
 import pickle
 import warnings
 
@@ -19,7 +18,6 @@ from sklearn.svm import SVC
 
 from skpcd.encoding import BagOfFeatures
 from skpcd.features import PFHTransformer
-from skpcd.io import read_point_cloud
 from skpcd.utils.estimator_checks import check_ragged_estimator
 
 
@@ -58,19 +56,16 @@ def _with_a_wire(cloud):
 
 
 @pytest.fixture(scope="module")
-def dales_small(dales_dir):
-    """8 real DALES objects per class (under 4000 points), in file order.
+def dales_small(labelled_objects):
+    """8 objects per class (at most 4000 points), in order: synthetic, then
+    real DALES ones.
 
     Every fifth object carries a wire of undefined descriptors.
     """
-    with open(dales_dir / "labels.csv") as f:
-        rows = [r for r in csv.reader(f) if r and r[0] != "file"]
+    all_clouds, all_labels, _ = labelled_objects
     clouds, labels, taken = [], [], {}
-    for name, label in rows:
-        if taken.get(label, 0) == 8 or (dales_dir / name).stat().st_size > 150_000:
-            continue
-        cloud = read_point_cloud(dales_dir / name)
-        if len(cloud) <= 4000:
+    for cloud, label in zip(all_clouds, all_labels, strict=True):
+        if taken.get(label, 0) < 8 and len(cloud) <= 4000:
             clouds.append(cloud)
             labels.append(label)
             taken[label] = taken.get(label, 0) + 1
@@ -307,6 +302,11 @@ def _one_hot_words(bof, descs):
     return bof.transform([row[None] for row in descs]).argmax(axis=1)
 
 
+# real PFH only: on the synthetic objects' PFH (many repeated descriptors)
+# MiniBatchKMeans leaves repeated words (289 distinct of 300), so 12 % of the
+# queries get another word at the same distance (97 % of the differences are
+# such ties) and the counts split between the copies
+@pytest.mark.parametrize("labelled_objects", ["dales"], indirect=True)
 def test_approximate_assignment_agrees_with_exact_on_real_pfh(dales_pfh):
     pfh, _ = dales_pfh
     rows = np.vstack(pfh)
