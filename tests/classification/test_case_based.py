@@ -233,10 +233,11 @@ def _subsample(clouds, n_points=300, seed=0):
 
 
 @pytest.fixture(scope="module")
-def dales_cases(dales):
-    """Volume and improved PFH of 40 DALES objects per class (at most 300
-    points each, to keep the test fast)."""
-    clouds, labels, _ = dales
+def dales_cases(labelled_objects):
+    """Volume and improved PFH of up to 40 objects per class (at most 300
+    points each, to keep the test fast): 20 synthetic ones, then 40 DALES
+    ones."""
+    clouds, labels, _ = labelled_objects
     keep = np.concatenate([np.flatnonzero(labels == c)[:40] for c in np.unique(labels)])
     clouds = _subsample([clouds[i] for i in keep])
     X = make_case_based_pipeline()[0].fit_transform(clouds)
@@ -254,6 +255,12 @@ def test_pipeline_layout(dales_cases):
         make_case_based_pipeline(volume_column=1)
 
 
+# The approximate tests run on DALES only, and are slow: each approximate
+# fit, and the first query after unpickling, costs about 6 s whatever the
+# number of cases (40 s for the first in a process), too much for a
+# synthetic variant.
+@pytest.mark.slow
+@pytest.mark.parametrize("labelled_objects", ["dales"], indirect=True)
 def test_approximate_recall_on_dales(dales_cases):
     X, labels, _ = dales_cases
     train = np.arange(len(X)) % 4 != 0
@@ -283,6 +290,8 @@ def test_approximate_recall_on_dales(dales_cases):
     assert_array_equal(refit.retrieve(Q, n_cases=5)[1], i_approx)
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("labelled_objects", ["dales"], indirect=True)
 def test_auto_switch(dales_cases, monkeypatch):
     from skpcd.classification import _case_based
 
