@@ -131,8 +131,8 @@ def test_unknown_algorithm_is_refused():
         compute_neighborhoods(np.zeros((3, 3)), n_neighbors=2, algorithm="ball")
 
 
-def test_grid_equals_kd_tree_on_real_objects(dales):
-    clouds = dales[0][:25]
+def test_grid_equals_kd_tree_on_objects(labelled_objects):
+    clouds = labelled_objects[0][:25]
     from skpcd.preprocessing._neighbors import search_packed
     from skpcd.preprocessing._normals import pack_neighborhoods
 
