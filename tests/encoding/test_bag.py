@@ -306,6 +306,7 @@ def _one_hot_words(bof, descs):
 # MiniBatchKMeans leaves repeated words (289 distinct of 300), so 12 % of the
 # queries get another word at the same distance (97 % of the differences are
 # such ties) and the counts split between the copies
+@pytest.mark.slow
 @pytest.mark.parametrize("labelled_objects", ["dales"], indirect=True)
 def test_approximate_assignment_agrees_with_exact_on_real_pfh(dales_pfh):
     pfh, _ = dales_pfh

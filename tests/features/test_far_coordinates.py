@@ -54,6 +54,7 @@ def _pooled_local_descriptors(offset):
     )
 
 
+@pytest.mark.slow
 def test_dales_objects_at_utm_coordinates_keep_their_descriptors(dales):
     """The report: real objects moved to UTM coordinates (what ``skpcd
     segment`` writes) got mean-pooled bins up to 47 apart, and a case-based

@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -82,6 +83,7 @@ def test_transformer_matches_function_and_separates_classes():
     assert height[labels == "car"].max() < height[labels == "pole"].min()
 
 
+@pytest.mark.slow
 def test_real_dales_objects_classified_well(dales):
     from sklearn.model_selection import StratifiedKFold, cross_val_score
 
