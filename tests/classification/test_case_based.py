@@ -259,6 +259,7 @@ def test_pipeline_layout(dales_cases):
 # fit, and the first query after unpickling, costs about 6 s whatever the
 # number of cases (40 s for the first in a process), too much for a
 # synthetic variant.
+@pytest.mark.xdist_group("pynndescent")  # its JIT compiled once
 @pytest.mark.slow
 @pytest.mark.parametrize("labelled_objects", ["dales"], indirect=True)
 def test_approximate_recall_on_dales(dales_cases):
@@ -290,6 +291,7 @@ def test_approximate_recall_on_dales(dales_cases):
     assert_array_equal(refit.retrieve(Q, n_cases=5)[1], i_approx)
 
 
+@pytest.mark.xdist_group("pynndescent")  # its JIT compiled once
 @pytest.mark.slow
 @pytest.mark.parametrize("labelled_objects", ["dales"], indirect=True)
 def test_auto_switch(dales_cases, monkeypatch):

@@ -83,6 +83,7 @@ def dales_pfh(dales_small):
 # -- sklearn conventions (the data-free checks are in tests/test_common.py) ----
 
 
+@pytest.mark.xdist_group("pynndescent")  # its JIT compiled once
 @pytest.mark.parametrize(
     "params",
     [
@@ -306,6 +307,7 @@ def _one_hot_words(bof, descs):
 # MiniBatchKMeans leaves repeated words (289 distinct of 300), so 12 % of the
 # queries get another word at the same distance (97 % of the differences are
 # such ties) and the counts split between the copies
+@pytest.mark.xdist_group("pynndescent")  # its JIT compiled once
 @pytest.mark.slow
 @pytest.mark.parametrize("labelled_objects", ["dales"], indirect=True)
 def test_approximate_assignment_agrees_with_exact_on_real_pfh(dales_pfh):
@@ -333,6 +335,7 @@ def test_approximate_assignment_agrees_with_exact_on_real_pfh(dales_pfh):
     assert np.minimum(a, e).sum() / e.sum() >= 0.98
 
 
+@pytest.mark.xdist_group("pynndescent")  # its JIT compiled once
 def test_auto_assignment_threshold(monkeypatch):
     # the documented threshold, then the rule at a small threshold (fitting
     # 2047 words to check it took 114 s)
@@ -349,6 +352,7 @@ def test_auto_assignment_threshold(monkeypatch):
     assert exact.assignment_ == "exact" and not hasattr(exact, "_index")
 
 
+@pytest.mark.xdist_group("pynndescent")  # its JIT compiled once
 def test_pickled_approximate_encoder_gives_same_output(dales_pfh):
     pfh, _ = dales_pfh
     bof = BagOfFeatures(n_words=50, assignment="approximate", random_state=0)

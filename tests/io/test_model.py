@@ -542,6 +542,7 @@ def test_crafted_trees_are_refused_before_predict(tmp_path):
     assert out.count("refused") == 5, out
 
 
+@pytest.mark.xdist_group("pynndescent")  # its JIT compiled once
 @pytest.mark.parametrize("which", ["bag", "cases"])
 def test_approximate_indexes_are_saved_and_rebuilt(tmp_path, which):
     # before: skops could not store the pynndescent indexes (TypeError:
