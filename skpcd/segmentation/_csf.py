@@ -6,7 +6,7 @@ inverted surface, and the internal springs (``rigidness``) keep the cloth
 from sinking into the gaps between objects. A point is ground when it lies
 within ``class_threshold`` of the settled cloth. The simulation itself is the
 authors' C++ code, PyPI package ``cloth-simulation-filter`` (import ``CSF``),
-an optional dependency: ``pip install skpcd[csf]``.
+a dependency of skpcd.
 """
 
 import contextlib
@@ -21,8 +21,8 @@ __all__ = ["csf_ground"]
 
 _MISSING = (
     "GroundFilter(method='csf') needs the reference cloth simulation filter, "
-    "PyPI package 'cloth-simulation-filter' (import CSF): pip install "
-    "'skpcd[csf]' or pip install cloth-simulation-filter"
+    "PyPI package 'cloth-simulation-filter' (import CSF), a dependency of "
+    "skpcd: pip install cloth-simulation-filter"
 )
 
 

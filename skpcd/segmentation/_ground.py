@@ -240,7 +240,7 @@ class GroundFilter(BaseEstimator):
     :meth:`fit` builds a terrain model (DEM) of the scene; :meth:`predict`
     says which points lie on it. With ``method="csf"`` the ground points
     are those of the cloth simulation filter (Zhang et al., 2016; the
-    authors' code, the optional package ``cloth-simulation-filter``): the
+    authors' code, the package ``cloth-simulation-filter``): the
     scene is turned upside down, a cloth of particles ``cell`` apart falls
     onto it and settles on the inverted terrain, held up over objects by
     its stiffness (``rigidness``); a point within ``threshold`` of the
@@ -266,8 +266,8 @@ class GroundFilter(BaseEstimator):
     Parameters
     ----------
     method : {"smrf", "csf"}, default="smrf"
-        The filter. "csf" needs the package ``cloth-simulation-filter``
-        (``pip install skpcd[csf]``) and uses ``cell``, ``threshold``,
+        The filter. "csf" runs the package ``cloth-simulation-filter``
+        (a dependency of skpcd) and uses ``cell``, ``threshold``,
         ``rigidness``, ``slope_smooth``, ``iterations`` and ``time_step``;
         "smrf" uses ``cell``, ``slope``, ``window``, ``threshold``,
         ``scalar`` and ``low_noise``.

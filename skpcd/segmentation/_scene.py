@@ -121,8 +121,8 @@ def segment_scene(
     ground : {"csf", "aerial", "mobile"}, GroundFilter or None, default="csf"
         Ground removal: a :class:`GroundFilter` with the parameters of
         ``GROUND_PRESETS[ground]`` ("csf": the cloth simulation filter,
-        which needs the package ``cloth-simulation-filter``, ``pip install
-        skpcd[csf]``; "aerial" and "mobile": SMRF), a filter of your own
+        through the package ``cloth-simulation-filter``; "aerial" and
+        "mobile": SMRF), a filter of your own
         (cloned), or None to keep every point. With ``tile_size`` only
         SMRF (see Notes).
     method : {"dbscan", "euclidean"}, default="dbscan"

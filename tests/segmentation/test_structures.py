@@ -79,7 +79,7 @@ def test_csf_ground_filter_separates_ground_and_repeats():
 
 def test_csf_missing_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "CSF", None)
-    with pytest.raises(ImportError, match=r"skpcd\[csf\]"):
+    with pytest.raises(ImportError, match="pip install cloth-simulation-filter"):
         GroundFilter(method="csf").fit(np.random.default_rng(0).random((50, 3)))
 
 
