@@ -77,7 +77,8 @@ def methods():
     }
 
 
-def street_scenes():
+def street_scans():
+    """The simulated streets: ``(kind, seed, bunch of make_street_scene)``."""
     from skpcd.datasets import make_street_scene
 
     for scanner in ("mobile", "ugv"):
@@ -88,10 +89,16 @@ def street_scenes():
                 scanner_params=MOBILE_PARAMS if scanner == "mobile" else None,
                 random_state=seed,
             )
-            yield f"street {scanner}", seed, s.points, s.labels.astype(str)
+            yield f"street {scanner}", seed, s
 
 
-def dales_scenes():
+def street_scenes():
+    for kind, seed, s in street_scans():
+        yield kind, seed, s.points, s.labels.astype(str)
+
+
+def dales_scenes_with_truth():
+    """The DALES scenes: ``(kind, seed, points, classes, object ids)``."""
     from skpcd.io import read_segments
     from skpcd.segmentation import make_scene
 
@@ -113,7 +120,12 @@ def dales_scenes():
                 labels[pick][np.maximum(truth, 0)],
                 np.where(truth == -1, "ground", "noise"),
             )
-            yield kind, seed, points, cls
+            yield kind, seed, points, cls, truth
+
+
+def dales_scenes():
+    for kind, seed, points, cls, _ in dales_scenes_with_truth():
+        yield kind, seed, points, cls
 
 
 def quality():

@@ -61,13 +61,7 @@ from sklearn.metrics import adjusted_rand_score
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from bench_descriptors import _import_open3d, _maxrss_mb, _reset_peak  # noqa: E402
-from bench_ground import (  # noqa: E402
-    DALES,
-    DALES_SAMPLINGS,
-    DALES_SEEDS,
-    MOBILE_PARAMS,
-    STREET_SEEDS,
-)
+from bench_ground import dales_scenes_with_truth, street_scans  # noqa: E402
 
 MIN_SIZE = 50
 METHODS = {
@@ -80,48 +74,20 @@ CAP_GB = 8
 
 
 def street_scenes():
-    from skpcd.datasets import make_street_scene
-
-    for scanner in ("mobile", "ugv"):
-        for seed in STREET_SEEDS:
-            s = make_street_scene(
-                100.0,
-                scanner=scanner,
-                scanner_params=MOBILE_PARAMS if scanner == "mobile" else None,
-                random_state=seed,
-            )
-            cls = s.labels.astype(str)
-            height = s.points[:, 2] - s.ground_height(s.points[:, 0], s.points[:, 1])
-            inst = s.instances.copy()
-            inst[cls == "facade"] = inst.max() + 1  # one wall
-            yield f"street {scanner}", seed, s.points, cls, inst, height
+    for kind, seed, s in street_scans():
+        cls = s.labels.astype(str)
+        height = s.points[:, 2] - s.ground_height(s.points[:, 0], s.points[:, 1])
+        inst = s.instances.copy()
+        inst[cls == "facade"] = inst.max() + 1  # one wall
+        yield kind, seed, s.points, cls, inst, height
 
 
 def dales_scenes():
-    from skpcd.io import read_segments
-    from skpcd.segmentation import make_scene
     from skpcd.segmentation._scene import _terrain
 
-    clouds, labels, _ = read_segments(DALES, DALES / "labels.csv")
-    for seed in DALES_SEEDS:
-        rng = np.random.default_rng(seed)
-        pick = np.concatenate(
-            [
-                rng.choice(np.flatnonzero(labels == c), 6, replace=False)
-                for c in np.unique(labels)
-            ]
-        )
-        for kind, kw in DALES_SAMPLINGS.items():
-            points, truth = make_scene(
-                [clouds[i] for i in pick], gap=3.0, random_state=seed, **kw
-            )
-            cls = np.where(
-                truth >= 0,
-                labels[pick][np.maximum(truth, 0)],
-                np.where(truth == -1, "ground", "noise"),
-            )
-            height = points[:, 2] - _terrain(points[:, 0], points[:, 1], 1.0)
-            yield kind, seed, points, cls, truth, height
+    for kind, seed, points, cls, truth in dales_scenes_with_truth():
+        height = points[:, 2] - _terrain(points[:, 0], points[:, 1], 1.0)
+        yield kind, seed, points, cls, truth, height
 
 
 def score(seg, cls, inst, height):
