@@ -23,7 +23,12 @@ from skpcd.features._pfh_kernels import (
     spfh_rows,
     spfh_values,
 )
-from skpcd.preprocessing._grid import ball_block, ball_block_normals, radius_grid
+from skpcd.preprocessing._grid import (
+    ball_block,
+    ball_block_normals,
+    radius_grid,
+    snake_order,
+)
 from skpcd.preprocessing._neighbors import Neighborhoods, compute_neighborhoods
 from skpcd.preprocessing._normals import (
     CLOUD_VIEWPOINT,
@@ -139,7 +144,7 @@ def _pfh_packed(p, n, nb, n_bins, n_threads, cloud_ptr=None):
         cloud = None
         if cloud_ptr is not None and len(cloud_ptr) > 2:
             cloud = np.repeat(np.arange(len(cloud_ptr) - 1), np.diff(cloud_ptr))
-        rows = _space_order(p, _radius_of(p, nb), cloud)
+        rows = _space_order(p, _radius_of(p, nb), cloud, n_threads)
         sorted_nb = (np.empty((0, 3)), np.empty(0, np.int32))
         rows = (rows, np.empty(0, np.int64), *sorted_nb)
         _pfh_reuse(*rows, *args, n_threads, _pos_pool(p, n_threads))
@@ -181,18 +186,11 @@ def _radius_of(p, nb):
     return float(np.median(np.sqrt((last.astype(np.float64) ** 2).sum(1))))
 
 
-def _space_order(p, radius, cloud=None):
-    """The points in a snake order over cells a quarter of ``radius`` wide:
-    x, then y up and down, then z; cloud by cloud with ``cloud`` (each
-    point's cloud: clouds in their local frames overlap)."""
-    h = 0.25 * radius
-    if not h > 0 or len(p) == 0:
-        return np.arange(len(p))
-    c = np.floor((p - p.min(axis=0)) / np.float32(h)).astype(np.int64)
-    snake = np.where(c[:, 0] % 2 == 0, c[:, 1], -c[:, 1])
-    if cloud is None:
-        return np.lexsort((c[:, 2], snake, c[:, 0]))
-    return np.lexsort((c[:, 2], snake, c[:, 0], cloud))
+def _space_order(p, radius, cloud=None, n_threads=1):
+    """The points in a snake order over cells a quarter of ``radius`` wide
+    (:func:`~skpcd.preprocessing._grid.snake_order`), cloud by cloud with
+    ``cloud`` (each point's cloud: clouds in their local frames overlap)."""
+    return snake_order(p, 0.25 * radius, cloud, n_threads)
 
 
 # Points per block of the blocked radius PFH (at least; 1/64 of the input
@@ -225,7 +223,7 @@ def _pfh_radius_blocked(clouds, radius, n_bins, given, viewpoint, n_threads):
         max_extent(np.float64),
         what="squared distances in float64 (the neighbour search)",
     )
-    grid = radius_grid(xyz, offsets, radius, lo_hi)
+    grid = radius_grid(xyz, offsets, radius, lo_hi, n_threads)
     order, cell_start = grid.order, grid.cell_start
     p, origins = local_frame(xyz, offsets)  # float32, each cloud in its frame
     viewpoints = local_viewpoints(viewpoint, xyz, offsets, origins).astype(np.float32)
@@ -274,7 +272,7 @@ def _pfh_radius_blocked(clouds, radius, n_bins, given, viewpoint, n_threads):
         args = (p, n, indptr, indices, n_bins, out)
         if reuse:
             cloud = np.searchsorted(offsets, point_of, side="right")
-            rows = _space_order(p[point_of], radius, cloud)
+            rows = _space_order(p[point_of], radius, cloud, n_threads)
             _pfh_reuse(rows, point_of, grid.xs, inv, *args, n_threads, pool)
         else:
             _pfh_rows_local(point_of, *args, n_threads)

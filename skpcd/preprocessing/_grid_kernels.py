@@ -63,14 +63,21 @@ def borrow_grid(grid):
 
 
 @njit(cache=True, nogil=True)
-def cell_keys(xyz, cloud_ptr, origin, h, dims, keys):
-    """Key of every point's cell within its cloud, into ``keys``."""
-    for c in range(len(cloud_ptr) - 1):
-        for i in range(cloud_ptr[c], cloud_ptr[c + 1]):
-            ix = _coord(xyz[i, 0], origin[c, 0], h[c], dims[c, 0])
-            iy = _coord(xyz[i, 1], origin[c, 1], h[c], dims[c, 1])
-            iz = _coord(xyz[i, 2], origin[c, 2], h[c], dims[c, 2])
-            keys[i] = (ix * dims[c, 1] + iy) * dims[c, 2] + iz
+def cell_keys(lo, hi, xyz, cloud_ptr, origin, h, dims, base, keys):
+    """Key of the cell of points ``lo`` to ``hi`` within their cloud, plus
+    ``base[c]`` for cloud ``c`` (empty: nothing added), into ``keys``."""
+    if hi <= lo:
+        return
+    c = np.searchsorted(cloud_ptr, lo, side="right") - 1
+    for i in range(lo, hi):
+        while i >= cloud_ptr[c + 1]:
+            c += 1
+        ix = _coord(xyz[i, 0], origin[c, 0], h[c], dims[c, 0])
+        iy = _coord(xyz[i, 1], origin[c, 1], h[c], dims[c, 1])
+        iz = _coord(xyz[i, 2], origin[c, 2], h[c], dims[c, 2])
+        keys[i] = (ix * dims[c, 1] + iy) * dims[c, 2] + iz
+        if len(base):
+            keys[i] += base[c]
 
 
 @njit(cache=True, nogil=True)
@@ -636,20 +643,89 @@ def radix_argsort(keys):
 
 
 @njit(cache=True, nogil=True)
-def gather_rows(xyz, order):
-    """``xyz[order]`` for an (n, 3) array."""
-    xs = np.empty((len(order), 3), dtype=xyz.dtype)
-    for t in range(len(order)):
+def snake_keys(points, cloud, h, keys):
+    """Keys of a snake walk over cubic cells ``h`` wide, into ``keys``.
+
+    Cell ``(x, y, z)`` of point ``i`` (from the minimum of ``points``) in
+    cloud ``cloud[i]`` (all 0 if ``cloud`` is empty): ordered by cloud,
+    then x, then y up in even x columns and down in odd ones, then z.
+    Returns False, keys unset, when they would not fit in an int64 (the
+    caller then sorts the coordinates themselves).
+    """
+    n = len(points)
+    if n == 0:
+        return True
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for d in range(3):
+        lo[d] = hi[d] = points[0, d]
+    for i in range(n):
+        for d in range(3):
+            lo[d] = min(lo[d], points[i, d])
+            hi[d] = max(hi[d], points[i, d])
+    n_clouds = 1
+    for i in range(len(cloud)):
+        n_clouds = max(n_clouds, cloud[i] + 1)
+    size = float(n_clouds)
+    for d in range(3):
+        size *= np.floor((hi[d] - lo[d]) / h) + 1.0
+    if not size < 2.0**62:
+        return False
+    dims = np.empty(3, dtype=np.int64)
+    for d in range(3):
+        dims[d] = math.floor((hi[d] - lo[d]) / h) + 1
+    ny, nz = dims[1], dims[2]
+    for i in range(n):
+        cx = min(math.floor((points[i, 0] - lo[0]) / h), dims[0] - 1)
+        cy = min(math.floor((points[i, 1] - lo[1]) / h), ny - 1)
+        cz = min(math.floor((points[i, 2] - lo[2]) / h), nz - 1)
+        if cx % 2:
+            cy = ny - 1 - cy
+        c = cloud[i] if len(cloud) else 0
+        keys[i] = ((c * dims[0] + cx) * ny + cy) * nz + cz
+    return True
+
+
+@njit(cache=True, nogil=True)
+def radix_histogram(keys, lo, hi, shift, hist):
+    """Counts of the 11-bit digit ``shift`` of ``keys[lo:hi]``, into
+    ``hist`` (2048,): one chunk of a parallel radix pass."""
+    hist[:] = 0
+    for t in range(lo, hi):
+        hist[(keys[t] >> shift) & 2047] += 1
+
+
+@njit(cache=True, nogil=True)
+def radix_scatter(keys, order, lo, hi, shift, offsets, keys_out, order_out):
+    """Move ``keys[lo:hi]`` and ``order[lo:hi]`` to their places for the
+    digit ``shift``, from ``offsets`` (2048,; advanced in place): one
+    chunk of a parallel, stable radix pass."""
+    for t in range(lo, hi):
+        d = (keys[t] >> shift) & 2047
+        q = offsets[d]
+        offsets[d] = q + 1
+        keys_out[q] = keys[t]
+        order_out[q] = order[t]
+
+
+@njit(cache=True, nogil=True)
+def gather_rows(lo, hi, xyz, order, xs):
+    """Rows ``lo`` to ``hi`` of ``xs = xyz[order]`` for (n, 3) arrays."""
+    for t in range(lo, hi):
         j = order[t]
         xs[t, 0] = xyz[j, 0]
         xs[t, 1] = xyz[j, 1]
         xs[t, 2] = xyz[j, 2]
-    return xs
 
 
 @njit(cache=True, nogil=True)
-def shift_keys(keys, cloud_ptr, base, sign):
-    """Add ``sign * base[c]`` to the keys of cloud ``c``, in place."""
-    for c in range(len(cloud_ptr) - 1):
-        for i in range(cloud_ptr[c], cloud_ptr[c + 1]):
-            keys[i] += sign * base[c]
+def shift_keys(lo, hi, keys, cloud_ptr, base):
+    """Subtract ``base[c]`` from the keys ``lo`` to ``hi`` of cloud ``c``
+    (cloud ``c`` at ``cloud_ptr[c]`` to ``cloud_ptr[c + 1]``), in place."""
+    if hi <= lo:
+        return
+    c = np.searchsorted(cloud_ptr, lo, side="right") - 1
+    for i in range(lo, hi):
+        while i >= cloud_ptr[c + 1]:
+            c += 1
+        keys[i] -= base[c]

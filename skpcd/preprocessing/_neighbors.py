@@ -22,6 +22,7 @@ from skpcd.preprocessing._grid import (
     ball_counts,
     ball_lists,
     build_grid,
+    gather_points,
     grid_shape,
     sort_points,
 )
@@ -34,6 +35,9 @@ ALGORITHMS = ("auto", "grid", "kd_tree")
 # Target number of points per occupied cell for k-nearest searches, as a
 # fraction of k: the 27 cells around a point then hold its k nearest.
 _OCCUPANCY = 0.4
+# The cell sizes are adapted again only while the clouds whose occupancy is
+# off hold more than this share of the points.
+_OFF_SHARE = 0.01
 # Shells of cells a k-nearest query may scan before a coarser grid takes over.
 _MAX_SHELL = 8
 # Passes on ever coarser grids before the remaining queries go to cKDTree.
@@ -223,7 +227,7 @@ def search_packed(
         )
         hard = np.zeros(n, dtype=np.bool_)
         todo = np.zeros(0, dtype=np.bool_)
-        grid = _knn_grid(xyz, cloud_ptr, int(n_neighbors), lo_hi)
+        grid = _knn_grid(xyz, cloud_ptr, int(n_neighbors), lo_hi, n_threads)
         rows = np.arange(grid.n_cells)
         for attempt in range(_COARSER):
             args = (rows, grid, indptr, _MAX_SHELL, todo, nb.indices, nb.sqdist, hard)
@@ -240,11 +244,11 @@ def search_packed(
             if attempt == _COARSER - 1:
                 break
             # isolated points: again on cells four times wider
-            grid = build_grid(xyz, cloud_ptr, 4 * grid.h, lo_hi)
+            grid = build_grid(xyz, cloud_ptr, 4 * grid.h, lo_hi, n_threads)
             rows = g.cells_with(todo, grid)
         _knn_kd_tree(xyz, cloud_ptr, indptr, np.flatnonzero(todo), n_threads, nb)
         return nb
-    grid = build_grid(xyz, cloud_ptr, np.full(len(sizes), radius), lo_hi)
+    grid = build_grid(xyz, cloud_ptr, np.full(len(sizes), radius), lo_hi, n_threads)
     counts = ball_counts(grid, radius, n_threads)
     np.cumsum(counts, out=indptr[1:])
     nb = Neighborhoods(
@@ -256,7 +260,7 @@ def search_packed(
     return nb
 
 
-def _knn_grid(xyz, cloud_ptr, k, lo_hi=None):
+def _knn_grid(xyz, cloud_ptr, k, lo_hi=None, n_threads=1):
     """Grid for k-nearest searches, cell sizes adapted to each cloud's density.
 
     Returns the :class:`~skpcd.preprocessing._grid.VoxelGrid`.
@@ -270,16 +274,19 @@ def _knn_grid(xyz, cloud_ptr, k, lo_hi=None):
     h = np.sqrt(area * target / np.maximum(sizes, 1))
     for _ in range(3):
         origin, h, dims = grid_shape(xyz, cloud_ptr, h, (lo, hi))
-        order, cells = sort_points(xyz, cloud_ptr, origin, h, dims)
+        order, cells = sort_points(xyz, cloud_ptr, origin, h, dims, n_threads)
         cloud_cells = cells[3]
         occupancy = sizes / np.maximum(np.diff(cloud_cells), 1)
         off = (occupancy < target / 2) | (occupancy > target * 2)
         off &= sizes > 4 * target
-        if not off.any():
+        # another sort for a few clouds costs more than it saves: the
+        # search is exact on any grid, only slower on a badly sized one
+        if sizes[off].sum() <= _OFF_SHARE * len(xyz):
             break
         # occupancy grows like h**2 on the surfaces LiDAR samples
         h = h * np.where(off, np.clip(np.sqrt(target / occupancy), 0.25, 4.0), 1.0)
-    return VoxelGrid(g.gather_rows(xyz, order), order, *cells, origin, h, dims)
+    xs = gather_points(xyz, order, n_threads)
+    return VoxelGrid(xs, order, *cells, origin, h, dims)
 
 
 def _sqdist(xyz, rows, idx):

@@ -1,36 +1,44 @@
 """3D grid sampling: one point per occupied cell of a cubic grid."""
 
 import typing
-from numbers import Real
+from concurrent.futures import ThreadPoolExecutor
+from numbers import Integral, Real
 
 import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
 
+from skpcd.preprocessing import _sampling_kernels as k
+from skpcd.preprocessing._grid import argsort_keys
 from skpcd.preprocessing._neighbors import _check_points
 from skpcd.preprocessing._spacing import point_spacing
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
+from skpcd.utils._parallel import effective_threads, parallel_rows
 
 __all__ = ["GridSampler", "grid_sample"]
 
 
-def _voxel_size(xyz, voxel_size):
+def _voxel_size(xyz, voxel_size, n_threads=1):
     if not (isinstance(voxel_size, str) and voxel_size == "auto"):
         if not (isinstance(voxel_size, Real) and 0 < voxel_size < np.inf):
             raise ValueError(
                 f'voxel_size must be a positive number or "auto", got {voxel_size!r}'
             )
         return float(voxel_size)
-    spacing = point_spacing(xyz)
+    spacing = point_spacing(xyz, workers=n_threads)
     # a cloud without two distinct points: any cell size keeps one point
     return spacing if np.isfinite(spacing) else 1.0
 
+
+# Clouds of at least this many points are sampled one at a time on all the
+# threads, smaller ones several at a time.
+_ALONE = 1 << 17
 
 # Cells per axis stay below this: their indices fit in an int64.
 _MAX_CELLS = 2.0**62
 
 
-def _grid_sample_indices(xyz, h):
+def _grid_sample_indices(xyz, h, n_threads=1):
     """Indices (ascending) of the point nearest its cell's centre, per cell."""
     if len(xyz) == 0:
         return np.zeros(0, dtype=np.intp)
@@ -38,9 +46,8 @@ def _grid_sample_indices(xyz, h):
     # everything relative to the grid's corner (exact for a cloud far from
     # the origin): cells and distances to their centres do not depend on
     # where the cloud lies, ties included
-    u = xyz - lo
     with np.errstate(over="ignore"):
-        extent = u.max(axis=0)
+        extent = xyz.max(axis=0) - lo
         n_cells = extent / h
     if not (n_cells < _MAX_CELLS).all():
         axis = int(np.argmax(~(n_cells < _MAX_CELLS)))
@@ -49,28 +56,44 @@ def _grid_sample_indices(xyz, h):
             f"({extent[axis]:.6g}) into {n_cells[axis]:.3g} cells, more than "
             "cell indices can hold (2**62): choose a larger voxel_size."
         )
+    dims = np.floor(n_cells).astype(np.int64) + 1
+    if np.prod(dims.astype(np.float64)) >= 2.0**62:
+        return _grid_sample_lexsort(xyz - lo, h)
+    # one key per cell, a stable radix sort (ties stay in index order), and
+    # in every run of one key the point nearest the centre
+    n = len(xyz)
+    keys = np.empty(n, dtype=np.int64)
+    d2 = np.empty(n, dtype=np.float64)
+    parallel_rows(k.cell_keys_centres, n, n_threads, xyz, lo, h, dims, keys, d2)
+    order, sorted_keys = argsort_keys(keys, n_threads)
+    del keys
+    chosen = np.zeros(n, dtype=np.bool_)
+    parallel_rows(k.nearest_in_cells, n, n_threads, sorted_keys, order, d2, chosen)
+    return np.flatnonzero(chosen)
+
+
+def _grid_sample_lexsort(u, h):
+    """:func:`_grid_sample_indices` for grids of 2**62 cells or more (keys
+    as three coordinates, a lexsort), from ``u``, the points minus their
+    minimum."""
     cell = np.floor(u / h).astype(np.int64)
     with np.errstate(over="ignore", invalid="ignore"):
         d2 = ((u - (cell + 0.5) * h) ** 2).sum(axis=1)
-    dims = cell.max(axis=0) + 1
-    if np.prod(dims.astype(np.float64)) < 2.0**62:
-        keys = [(cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]]
-    else:
-        keys = [cell[:, 2], cell[:, 1], cell[:, 0]]
+    keys = [cell[:, 2], cell[:, 1], cell[:, 0]]
     # by cell, then distance to the centre, then index (lexsort is stable)
     order = np.lexsort([d2, *keys])
-    sorted_keys = np.column_stack([k[order] for k in keys])
+    sorted_keys = np.column_stack([c[order] for c in keys])
     first = np.ones(len(order), dtype=bool)
     first[1:] = (sorted_keys[1:] != sorted_keys[:-1]).any(axis=1)
     return np.sort(order[first])
 
 
-def grid_sample(points, voxel_size="auto", *, return_index=False):
+def grid_sample(points, voxel_size="auto", *, return_index=False, n_jobs=None):
     """3D grid sampling of one cloud: in every occupied cell, the point
     closest to the cell's centre.
 
     The grid starts at the cloud's minimum corner, so the result does not
-    change when the cloud is translated. O(n log n) (one sort).
+    change when the cloud is translated. O(n) (a radix sort of the cells).
 
     Parameters
     ----------
@@ -85,6 +108,9 @@ def grid_sample(points, voxel_size="auto", *, return_index=False):
         is reduced to one point).
     return_index : bool, default=False
         Also return the indices of the kept points.
+    n_jobs : int, default=None
+        Threads for the cell keys, the sort and the choice in each cell;
+        None means 1, -1 all cores. The result is the same for every value.
 
     Returns
     -------
@@ -119,7 +145,9 @@ def grid_sample(points, voxel_size="auto", *, return_index=False):
     """
     points = np.asarray(points)
     xyz = _check_points(points)
-    index = _grid_sample_indices(xyz, _voxel_size(xyz, voxel_size))
+    n_threads = effective_threads(n_jobs)
+    h = _voxel_size(xyz, voxel_size, n_threads)
+    index = _grid_sample_indices(xyz, h, n_threads)
     if return_index:
         return points[index], index
     return points[index]
@@ -139,6 +167,10 @@ class GridSampler(CloudTransformer):
     voxel_size : float or "auto", default="auto"
         Cell edge in the units of the data, or ``"auto"`` for each cloud's
         median nearest-neighbour spacing.
+    n_jobs : int, default=None
+        Threads; None means 1, -1 all cores. A large cloud is sampled on
+        all of them; a list of small clouds, several clouds at a time. The
+        result is the same for every value.
 
     Attributes
     ----------
@@ -161,10 +193,12 @@ class GridSampler(CloudTransformer):
 
     _parameter_constraints: typing.ClassVar[dict] = {
         "voxel_size": [Interval(Real, 0, None, closed="neither"), StrOptions({"auto"})],
+        "n_jobs": [Integral, None],
     }
 
-    def __init__(self, voxel_size="auto"):
+    def __init__(self, voxel_size="auto", n_jobs=None):
         self.voxel_size = voxel_size
+        self.n_jobs = n_jobs
 
     def _validate(self, X):
         return check_point_clouds(X, min_points=0)
@@ -182,4 +216,20 @@ class GridSampler(CloudTransformer):
         sampled : list of ndarray of shape (n_kept_i, n_columns_i)
             The kept points of each cloud, in their original order.
         """
-        return [grid_sample(c, self.voxel_size) for c in self._validate(X)]
+        X = self._validate(X)
+        n_threads = effective_threads(self.n_jobs)
+        small = [i for i, c in enumerate(X) if len(c) < _ALONE]
+        out = [None] * len(X)
+        for i in range(len(X)):
+            if len(X[i]) >= _ALONE:  # on all threads, one at a time
+                out[i] = grid_sample(X[i], self.voxel_size, n_jobs=n_threads)
+        if n_threads == 1 or len(small) < 2:
+            for i in small:
+                out[i] = grid_sample(X[i], self.voxel_size)
+            return out
+        # the small clouds, several at a time, each on one thread
+        with ThreadPoolExecutor(n_threads) as pool:
+            done = pool.map(lambda i: grid_sample(X[i], self.voxel_size), small)
+            for i, sampled in zip(small, done, strict=True):
+                out[i] = sampled
+        return out

@@ -25,7 +25,7 @@ from sklearn.utils.validation import validate_data
 
 from skpcd.preprocessing._grid import ball_counts, radius_grid
 from skpcd.segmentation import _cluster_kernels as k
-from skpcd.utils._parallel import effective_threads, parallel_rows
+from skpcd.utils._parallel import effective_threads, parallel_rows, parallel_section
 from skpcd.utils._validation import refuse_sequence
 
 __all__ = [
@@ -80,9 +80,10 @@ def _union(grid, core, r2, n_threads):
     forests = [np.arange(n, dtype=dtype) for _ in range(n_threads)]
     args = (grid, core, r2)
     if n_threads == 1:
-        k.union_core(0, n_cells, *args, forests[0])
+        with parallel_section("union_core"):
+            k.union_core(0, n_cells, *args, forests[0])
         return forests[0]
-    with ThreadPoolExecutor(n_threads) as pool:
+    with parallel_section("union_core"), ThreadPoolExecutor(n_threads) as pool:
         jobs = [
             pool.submit(k.union_core, bounds[i], bounds[i + 1], *args, forests[i])
             for i in range(n_threads)
@@ -139,7 +140,7 @@ def grid_dbscan(xyz, eps, min_samples, *, n_jobs=None):
         return np.zeros(0, np.int64), np.zeros(0, np.bool_)
     n_threads = effective_threads(n_jobs)
     r2 = float(eps) ** 2
-    grid = radius_grid(xyz, np.array([0, n], dtype=np.int64), eps)
+    grid = radius_grid(xyz, np.array([0, n], dtype=np.int64), eps, None, n_threads)
     if min_samples <= 1:
         core_sorted = np.ones(n, dtype=np.bool_)
     else:

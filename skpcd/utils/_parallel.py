@@ -30,6 +30,7 @@ workers of a ``dask.distributed`` cluster.
 import contextlib
 import contextvars
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -99,6 +100,47 @@ def task_threads():
     return getattr(_TASK, "n_threads", None)
 
 
+# Wall seconds in the parallel sections, by name, while thread_profile()
+# collects them (for benchmarks/bench_threads.py); None otherwise.
+_PROFILE = None
+_PROFILE_DEPTH = threading.local()
+
+
+@contextlib.contextmanager
+def parallel_section(name):
+    """Mark a section whose work is spread over the threads.
+
+    A no-op unless :func:`thread_profile` is collecting; then the wall time
+    of the outermost section is added to ``name``'s total. Everything
+    outside the sections is the serial part of a call (the part that no
+    thread count shortens).
+    """
+    profile = _PROFILE
+    depth = getattr(_PROFILE_DEPTH, "depth", 0)
+    if profile is None or depth:
+        yield
+        return
+    _PROFILE_DEPTH.depth = 1
+    t0 = time.perf_counter()
+    try:
+        yield
+    finally:
+        _PROFILE_DEPTH.depth = 0
+        profile[name] = profile.get(name, 0.0) + time.perf_counter() - t0
+
+
+@contextlib.contextmanager
+def thread_profile():
+    """Collect the wall time of every :func:`parallel_section` (one caller
+    thread at a time), by section name, into the dict it yields."""
+    global _PROFILE
+    _PROFILE = {}
+    try:
+        yield _PROFILE
+    finally:
+        _PROFILE = None
+
+
 def parallel_rows(kernel, n_rows, n_threads, *args, min_chunk=_MIN_CHUNK):
     """Run ``kernel(lo, hi, *args)`` over ``range(n_rows)`` in chunks.
 
@@ -124,6 +166,11 @@ def parallel_rows(kernel, n_rows, n_threads, *args, min_chunk=_MIN_CHUNK):
             f"effective_threads at the boundary, got {n_threads!r}"
         )
     n_threads = max(1, int(n_threads))
+    with parallel_section(getattr(kernel, "__name__", "kernel")):
+        _run_rows(kernel, n_rows, n_threads, args, min_chunk)
+
+
+def _run_rows(kernel, n_rows, n_threads, args, min_chunk):
     if n_threads == 1 or n_rows <= min_chunk:
         kernel(0, n_rows, *args)
         return

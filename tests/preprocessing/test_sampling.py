@@ -74,3 +74,21 @@ def test_voxel_size_too_small_for_the_extent_is_a_clear_error():
     assert len(grid_sample(pts, 1e-9)) == 2
     with pytest.raises(ValueError, match="cells"):
         GridSampler().fit_transform([np.random.default_rng(0).random((9, 3)) * 1e200])
+
+
+def test_the_same_points_for_every_thread_count_and_as_the_lexsort():
+    from skpcd.preprocessing._sampling import _grid_sample_lexsort
+
+    rng = np.random.default_rng(3)
+    # centimetre coordinates: many points tie at the same distance to a centre
+    pts = np.round(rng.uniform(0, 30, (300_000, 3)), 2) + [5e5, 4.2e6, 10.0]
+    h = 0.25
+    _, one = grid_sample(pts, h, return_index=True)
+    _, two = grid_sample(pts, h, return_index=True, n_jobs=2)
+    np.testing.assert_array_equal(one, two)
+    np.testing.assert_array_equal(one, _grid_sample_lexsort(pts - pts.min(axis=0), h))
+    clouds = [rng.uniform(0, 3, (n, 3)) for n in (0, 1, 50, 2000, 150_000)]
+    a = GridSampler(voxel_size=0.2).fit_transform(clouds)
+    b = GridSampler(voxel_size=0.2, n_jobs=2).fit_transform(clouds)
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x, y)
