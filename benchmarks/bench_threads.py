@@ -192,7 +192,7 @@ def _report(R):
         f"{'stage':10s} {'1 thread':>9s} {'2 threads':>9s} {'speed-up':>8s} "
         f"{'target':>7s} {'serial':>7s} {'Amdahl 2':>8s} "
         + " ".join(f"{'x' + str(c):>6s}" for c in CORES)
-        + "  largest sections of the serial part / parallel part",
+        + "  serial part; largest parallel sections",
     ]
     for name, r in R["stages"].items():
         if "error" in r.get("1", {}) or "error" in r.get("2", {}):

@@ -14,6 +14,7 @@ from skpcd.preprocessing._spacing import point_spacing
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
 from skpcd.utils._parallel import effective_threads, parallel_rows
+from skpcd.utils._validation import point_bounds
 
 __all__ = ["GridSampler", "grid_sample"]
 
@@ -42,12 +43,12 @@ def _grid_sample_indices(xyz, h, n_threads=1):
     """Indices (ascending) of the point nearest its cell's centre, per cell."""
     if len(xyz) == 0:
         return np.zeros(0, dtype=np.intp)
-    lo = xyz.min(axis=0)
+    lo, hi = point_bounds(xyz)
     # everything relative to the grid's corner (exact for a cloud far from
     # the origin): cells and distances to their centres do not depend on
     # where the cloud lies, ties included
     with np.errstate(over="ignore"):
-        extent = xyz.max(axis=0) - lo
+        extent = hi - lo
         n_cells = extent / h
     if not (n_cells < _MAX_CELLS).all():
         axis = int(np.argmax(~(n_cells < _MAX_CELLS)))

@@ -17,6 +17,8 @@ import sys
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from skpcd.utils._validation import point_bounds
+
 __all__ = ["csf_ground"]
 
 _MISSING = (
@@ -153,7 +155,7 @@ def _csf_once(
     ground = np.zeros(len(xyz), dtype=bool)
     # CSF works in float64 but loses precision on large coordinates (UTM):
     # simulate around the scene's corner
-    shifted = np.ascontiguousarray(xyz - xyz.min(axis=0))
+    shifted = np.ascontiguousarray(xyz - point_bounds(xyz)[0])
     fill = _far_fill(shifted, float(cloth_resolution))
     if len(fill):
         shifted = np.vstack([shifted, fill])
@@ -214,7 +216,7 @@ def _far_fill(xyz, cell):
 
     from skpcd.segmentation._ground_kernels import cell_minimum
 
-    extent = xyz[:, :2].max(axis=0)
+    extent = point_bounds(xyz[:, :2])[1]
     nx, ny = (int(v) for v in np.floor(extent / cell) + 1)
     if nx * ny > _MAX_FILL_CELLS or nx * ny <= 1:
         return np.zeros((0, 3))

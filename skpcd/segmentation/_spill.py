@@ -21,6 +21,7 @@ from skpcd.io._api import read_point_cloud
 from skpcd.io._chunks import file_bounds, is_path, is_streamed, iter_file_chunks
 from skpcd.segmentation._clusters import check_scene
 from skpcd.segmentation._tile_geometry import TileGrid
+from skpcd.utils._validation import point_bounds
 
 __all__ = [
     "TiledScene",
@@ -64,8 +65,8 @@ def scene_bounds(source, chunk_size):
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for xyz in iter_chunks(source, chunk_size):
         if len(xyz):
-            lo = np.minimum(lo, xyz.min(axis=0))
-            hi = np.maximum(hi, xyz.max(axis=0))
+            lo_c, hi_c = point_bounds(xyz)
+            lo, hi = np.minimum(lo, lo_c), np.maximum(hi, hi_c)
     return lo, hi
 
 
@@ -224,8 +225,8 @@ def tile_scene(
                 continue
             if not np.all(np.isfinite(xyz)):
                 raise ValueError("the scene has NaN or infinite coordinates")
-            lo = np.minimum(lo, xyz.min(axis=0))
-            hi = np.maximum(hi, xyz.max(axis=0))
+            lo_c, hi_c = point_bounds(xyz)
+            lo, hi = np.minimum(lo, lo_c), np.maximum(hi, hi_c)
             owned += np.bincount(grid.owner(xyz), minlength=grid.n_tiles)
             rows, tiles = grid.route(xyz)
             records = np.empty(len(rows), dtype=_RECORD)
