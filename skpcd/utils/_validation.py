@@ -168,7 +168,10 @@ def _plain_float_array(cloud, dtype, ensure_all_finite, copy):
     if cloud.dtype.kind != "f" or not any(cloud.dtype == t for t in accepted):
         return False
     # a finite sum means finite values (sklearn's own first test)
-    return not ensure_all_finite or bool(np.isfinite(cloud.sum()))
+    if not ensure_all_finite:
+        return True
+    with np.errstate(over="ignore", invalid="ignore"):
+        return bool(np.isfinite(cloud.sum()))
 
 
 def _check_cloud(cloud, dtype, ensure_all_finite, copy, where):

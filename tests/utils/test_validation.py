@@ -176,3 +176,32 @@ def test_local_frame_refuses_extents_float32_cannot_square():
         local_frame(bad, np.array([0, 2, 4]))
     # float64 holds it; an empty cloud has no extent
     local_frame(bad, np.array([0, 2, 2, 4]), dtype=np.float64)
+
+
+@pytest.mark.parametrize(
+    "bad", [np.nan, np.inf, -np.inf, 1e308], ids=["nan", "inf", "-inf", "huge"]
+)
+def test_the_fast_path_for_float_arrays_answers_as_check_array(bad):
+    # a finite float array is taken as it is; one with a non-finite value
+    # (or whose sum overflows, 1e308 twice: still finite, so accepted)
+    # goes through check_array and its message
+    a = np.zeros((5, 3))
+    a[2, 1] = bad
+    a[3, 1] = bad
+    if np.isfinite(bad):
+        assert check_point_clouds([a])[0] is a
+        return
+    with pytest.raises(ValueError, match=r"X\[1\].*(NaN|infinity)"):
+        check_point_clouds([np.zeros((2, 3)), a])
+    assert check_point_clouds([a], ensure_all_finite=False)[0] is a
+
+
+def test_point_bounds_equals_min_and_max():
+    from skpcd.utils._validation import point_bounds
+
+    a = np.random.default_rng(0).normal(size=(1000, 4)) * 1e6
+    lo, hi = point_bounds(a)
+    np.testing.assert_array_equal(lo, a.min(axis=0))
+    np.testing.assert_array_equal(hi, a.max(axis=0))
+    lo, hi = point_bounds(a[:, :2])
+    np.testing.assert_array_equal(hi, a[:, :2].max(axis=0))
