@@ -133,10 +133,11 @@ def compute_pfh(
     return _pfh_packed(p, n, nb, int(n_bins), n_threads)
 
 
-def _pfh_packed(p, n, nb, n_bins, n_threads, cloud_ptr=None):
+def _pfh_packed(p, n, nb, n_bins, n_threads, cloud_ptr=None, out=None):
     """PFH kernel over float32 packed arrays (clouds at ``cloud_ptr``, in
-    their local frames)."""
-    out = unshared_zeros((len(p), n_bins**3), np.float32)
+    their local frames), into ``out`` (zeroed, float32) when given."""
+    if out is None:
+        out = unshared_zeros((len(p), n_bins**3), np.float32)
     args = (p, n, nb.indptr, nb.indices, n_bins, out)
     if len(p) and len(nb.indices) >= ROW_MIN * len(p) and n_bins**3 < 2**15:
         # large neighbourhoods: visited in space order, consecutive ones
@@ -199,7 +200,7 @@ def _space_order(p, radius, cloud=None, n_threads=1):
 _BLOCK = 2048
 
 
-def _pfh_radius_blocked(clouds, radius, n_bins, given, viewpoint, n_threads):
+def _pfh_radius_blocked(clouds, radius, n_bins, given, viewpoint, n_threads, out=None):
     """PFH with a radius search, neighbourhoods block by block.
 
     Memory stays that of the output, the points and their normals: the
@@ -256,7 +257,8 @@ def _pfh_radius_blocked(clouds, radius, n_bins, given, viewpoint, n_threads):
         for cells, t0, t1 in blocks:
             ball_block(grid, radius, cells, counts[t0:t1], n_threads)
     release_free_memory()  # the pages of the freed temporaries, before the output
-    out = unshared_zeros((n_pts, n_bins**3), np.float32)
+    if out is None:
+        out = unshared_zeros((n_pts, n_bins**3), np.float32)
     pool = _pos_pool(p, n_threads)
     # each point's row in the grid order: pfh_rows_reuse orders the pairs
     # of an unsorted ball by the search's own distances (grid.xs)
@@ -294,6 +296,10 @@ def _pfh_rows_local(point_of, p, n, indptr, indices, n_bins, out, n_threads):
     parallel_rows(pfh_rows, len(point_of), n_threads, *args, min_chunk=256)
     out[point_of] = block
 
+
+# Points per part of a pooled transform (whole clouds; a larger cloud is a
+# part of its own): the parts share one output buffer.
+_POOLED_PART = 1 << 18
 
 # Pair counts up to this many are turned into PCL's sums by table lookup.
 _TABLE_PAIRS = 255
@@ -333,10 +339,13 @@ def _fpfh_packed(p, n, nb, n_bins, convention, n_threads):
     return _fpfh_from_counts(p, counts, table, nb, n_bins, convention, n_threads)
 
 
-def _fpfh_from_counts(p, counts, table, nb, n_bins, convention, n_threads):
-    """FPFH from the SPFH pair counts of :func:`_spfh_counts`."""
+def _fpfh_from_counts(p, counts, table, nb, n_bins, convention, n_threads, out=None):
+    """FPFH from the SPFH pair counts of :func:`_spfh_counts`, into ``out``
+    (zeroed, float32) when given, unless the convention sums in float64."""
     mode = FPFH_CONVENTIONS.index(convention)
-    out = unshared_zeros((len(p), 3 * n_bins), np.float64 if mode == 2 else np.float32)
+    if out is None or mode == 2:
+        dtype = np.float64 if mode == 2 else np.float32
+        out = unshared_zeros((len(p), 3 * n_bins), dtype)
     args = (p, counts, nb.indptr, nb.indices, table, n_bins, mode, out)
     parallel_rows(fpfh_rows, len(p), n_threads, *args)
     return out.astype(np.float32, copy=False)
@@ -475,9 +484,10 @@ class _LocalDescriptor(CloudTransformer):
         mask = np.repeat(np.asarray(given), [len(c) for c in clouds])
         return np.vstack(blocks).astype(np.float32), mask
 
-    def _compute(self, clouds, n_threads):
+    def _compute(self, clouds, n_threads, out=None):
         """Packed descriptors, the undefined-point mask and the cloud offsets
-        of validated clouds, the kernels on ``n_threads`` threads."""
+        of validated clouds, the kernels on ``n_threads`` threads; into
+        ``out`` (zeroed rows, one per point) when given."""
         k = self.n_neighbors
         if k is None and self.radius is None:
             k = self._default_n_neighbors
@@ -513,16 +523,16 @@ class _LocalDescriptor(CloudTransformer):
         # the search's temporaries are freed: return their pages to the system
         # before the kernels allocate their outputs (lower peak memory)
         release_free_memory()
-        pairs = self._pair_stage(p, n, nb, offsets, n_threads)
+        pairs = self._pair_stage(p, n, nb, offsets, n_threads, out)
         del n  # no later stage reads the normals: freed before its output
-        out = self._final_stage(p, pairs, nb, n_threads)
+        out = self._final_stage(p, pairs, nb, n_threads, out)
         return out, undefined, offsets
 
-    def _pair_stage(self, p, n, nb, offsets, n_threads):
+    def _pair_stage(self, p, n, nb, offsets, n_threads, out=None):
         """The kernels that read the normals (the pair features)."""
         raise NotImplementedError
 
-    def _final_stage(self, p, pairs, nb, n_threads):
+    def _final_stage(self, p, pairs, nb, n_threads, out=None):
         """The kernels after the normals are freed; by default none."""
         return pairs
 
@@ -570,7 +580,36 @@ class _LocalDescriptor(CloudTransformer):
 
     def _transform_batch(self, clouds, n_threads):
         """:meth:`transform` of validated clouds (one batch of them)."""
-        out, undefined, offsets = self._compute(clouds, n_threads)
+        if self.pooling is not None:
+            return self._pooled_batch(clouds, n_threads)
+        return self._rows(*self._compute(clouds, n_threads))
+
+    def _pooled_batch(self, clouds, n_threads):
+        """The pooled rows of a batch, computed a part of at most
+        :data:`_POOLED_PART` points at a time (whole clouds) in one output
+        buffer, zeroed between parts: no array of every point's
+        descriptor, and its pages faulted in once, not for each point of
+        the batch (the same rows as all at once: clouds never interact)."""
+        parts, size = [], 0
+        for c in clouds:
+            if not parts or size + len(c) > _POOLED_PART:
+                parts.append([])
+                size = 0
+            parts[-1].append(c)
+            size += len(c)
+        largest = max(sum(len(c) for c in part) for part in parts)
+        buffer = unshared_zeros((largest, self._width()), np.float32)
+        pooled = []
+        for k, part in enumerate(parts):
+            m = sum(len(c) for c in part)
+            if k:
+                buffer[:m] = 0.0
+            rows = self._rows(*self._compute(part, n_threads, buffer[:m]))
+            pooled.extend(_pool(block, self.pooling) for block in rows)
+        return np.vstack(pooled)
+
+    def _rows(self, out, undefined, offsets):
+        """The per-point rows of each cloud, undefined points as asked."""
         if self.undefined == "nan":
             out[undefined] = np.nan
         elif self.undefined == "zero":
@@ -581,9 +620,7 @@ class _LocalDescriptor(CloudTransformer):
             if self.undefined == "drop":
                 block = block[~undefined[offsets[i] : offsets[i + 1]]]
             rows.append(block)
-        if self.pooling is None:
-            return rows
-        return np.vstack([_pool(block, self.pooling) for block in rows])
+        return rows
 
     def get_feature_names_out(self, input_features=None):
         """Names of the descriptor columns, ``pfh0``... or ``fpfh0``...
@@ -762,19 +799,19 @@ class PFHTransformer(_LocalDescriptor):
     def _width(self):
         return int(self.n_bins) ** 3
 
-    def _compute(self, clouds, n_threads):
+    def _compute(self, clouds, n_threads, out=None):
         if self.radius is None or not (
             self.normal_n_neighbors is None and self.normal_radius is None
         ):
-            return super()._compute(clouds, n_threads)
+            return super()._compute(clouds, n_threads, out)
         # radius search: neighbourhoods block by block (memory)
         given = self._given_normals(clouds)
         vp = _check_viewpoint(self.viewpoint)
         args = (float(self.radius), int(self.n_bins), given, vp, n_threads)
-        return _pfh_radius_blocked(clouds, *args)
+        return _pfh_radius_blocked(clouds, *args, out)
 
-    def _pair_stage(self, p, n, nb, offsets, n_threads):
-        return _pfh_packed(p, n, nb, int(self.n_bins), n_threads, offsets)
+    def _pair_stage(self, p, n, nb, offsets, n_threads, out=None):
+        return _pfh_packed(p, n, nb, int(self.n_bins), n_threads, offsets, out)
 
 
 class FPFHTransformer(_LocalDescriptor):
@@ -853,13 +890,13 @@ class FPFHTransformer(_LocalDescriptor):
     def _width(self):
         return 3 * int(self.n_bins)
 
-    def _pair_stage(self, p, n, nb, offsets, n_threads):
+    def _pair_stage(self, p, n, nb, offsets, n_threads, out=None):
         """SPFH as pair counts: the only FPFH stage that reads the normals."""
         return _spfh_counts(p, n, nb, int(self.n_bins), n_threads, pack=True)
 
-    def _final_stage(self, p, pairs, nb, n_threads):
+    def _final_stage(self, p, pairs, nb, n_threads, out=None):
         counts, table = pairs
         # the normals are gone: hand their pages back before the output
         release_free_memory()
         args = (p, counts, table, nb, int(self.n_bins), self.convention, n_threads)
-        return _fpfh_from_counts(*args)
+        return _fpfh_from_counts(*args, out)

@@ -419,3 +419,34 @@ def test_radius_pfh_in_blocks_equals_one_pass(monkeypatch, normals):
             np.testing.assert_array_equal(a, b)
     mask = est.undefined_mask(clouds)
     assert mask[2].all() and not mask[0].all()
+
+
+@pytest.mark.parametrize(
+    "est",
+    [
+        PFHTransformer(n_neighbors=8),
+        PFHTransformer(radius=0.4),
+        FPFHTransformer(n_neighbors=8),
+        FPFHTransformer(n_neighbors=8, convention="paper"),
+    ],
+    ids=["pfh", "pfh-radius", "fpfh", "fpfh-paper"],
+)
+@pytest.mark.parametrize("pooling", ["mean", "sum", "max"])
+def test_pooled_parts_give_the_pooled_rows_of_all_points(est, pooling, monkeypatch):
+    from sklearn.base import clone
+
+    from skpcd.features import _pfh
+    from skpcd.features._pfh import _pool
+
+    est = clone(est)
+    X = make_point_clouds(9, n_points=300, random_state=3)
+    X[4] = X[4][:2]  # undefined descriptors: NaN rows, left out of the pool
+    rows = est.set_params(undefined="nan").fit_transform(X)
+    expected = np.vstack([_pool(r, pooling) for r in rows])
+    monkeypatch.setattr(_pfh, "_POOLED_PART", 700)  # parts of 1-3 clouds
+    pooled = est.set_params(pooling=pooling).fit_transform(X)
+    np.testing.assert_array_equal(pooled, expected)
+    whole = est.set_params(pooling=pooling).fit_transform([np.vstack(X)])
+    monkeypatch.setattr(_pfh, "_POOLED_PART", 10**9)  # one part
+    np.testing.assert_array_equal(est.fit_transform(X), expected)
+    np.testing.assert_array_equal(est.fit_transform([np.vstack(X)]), whole)
