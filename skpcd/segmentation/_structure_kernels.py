@@ -64,10 +64,23 @@ def local_shape(xyz, indptr, indices, linearity, planarity, normal, axis_z, spre
     sign arbitrary; shape (n, 3)), ``|z|`` of the main axis (eigenvector of
     l1), and ``spread`` sqrt(l2), the thickness across the main axis
     (metres). Neighbourhoods of fewer than 3 points get zeros (float32
-    outputs)."""
-    for i in range(len(indptr) - 1):
-        lo, hi = indptr[i], indptr[i + 1]
-        n = hi - lo
+    outputs). All rows of :func:`local_shape_rows`."""
+    local_shape_rows(
+        0, len(indptr) - 1, xyz, indptr, indices, linearity, planarity, normal,
+        axis_z, spread,
+    )  # fmt: skip
+
+
+@njit(cache=True, nogil=True)
+def local_shape_rows(
+    lo, hi, xyz, indptr, indices, linearity, planarity, normal, axis_z, spread
+):
+    """Rows ``lo`` to ``hi`` of :func:`local_shape` (a chunk of
+    :func:`~skpcd.utils._parallel.parallel_rows`): each row reads the
+    neighbourhood of its point and writes its own outputs only."""
+    for i in range(lo, hi):
+        start, stop = indptr[i], indptr[i + 1]
+        n = stop - start
         linearity[i] = 0.0
         planarity[i] = 0.0
         normal[i, 0] = 0.0
@@ -78,7 +91,7 @@ def local_shape(xyz, indptr, indices, linearity, planarity, normal, axis_z, spre
         if n < 3:
             continue
         mx = my = mz = 0.0
-        for j in range(lo, hi):
+        for j in range(start, stop):
             k = indices[j]
             mx += xyz[k, 0] - xyz[i, 0]
             my += xyz[k, 1] - xyz[i, 1]
@@ -87,7 +100,7 @@ def local_shape(xyz, indptr, indices, linearity, planarity, normal, axis_z, spre
         my /= n
         mz /= n
         c00 = c01 = c02 = c11 = c12 = c22 = 0.0
-        for j in range(lo, hi):
+        for j in range(start, stop):
             k = indices[j]
             dx = xyz[k, 0] - xyz[i, 0] - mx
             dy = xyz[k, 1] - xyz[i, 1] - my

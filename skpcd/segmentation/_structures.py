@@ -25,6 +25,7 @@ k-NN graph of the cluster.
 import numpy as np
 
 from skpcd.segmentation._clusters import euclidean_clusters
+from skpcd.utils._parallel import effective_threads, parallel_rows
 
 __all__ = ["STRUCTURE_DEFAULTS", "height_above_ground", "segment_structures"]
 
@@ -59,7 +60,7 @@ _WIRE_COLUMN_POINTS = 3  # most points 0.3-2 m above or below a wire point
 _FLAT_SHARE = 0.5  # planar share of a cluster touching a facade that joins it
 
 
-def height_above_ground(xyz, ground_xyz, cell=1.0):
+def height_above_ground(xyz, ground_xyz, cell=1.0, n_threads=1):
     """Height of points above the ground points: ``z`` minus the mean height
     of the ground points in the nearest ``cell`` x ``cell`` square holding
     ground; ``z`` minus the lowest ``z`` without ground. The squares are
@@ -71,6 +72,9 @@ def height_above_ground(xyz, ground_xyz, cell=1.0):
     xyz : ndarray of shape (n_points, 3)
     ground_xyz : ndarray of shape (n_ground, 3)
     cell : float, default=1.0
+    n_threads : int, default=1
+        Threads of the k-d tree query (each point's answer is its own: the
+        same whatever the count).
 
     Returns
     -------
@@ -89,7 +93,7 @@ def height_above_ground(xyz, ground_xyz, cell=1.0):
     zmean = np.bincount(inv, ground_xyz[:, 2]) / np.bincount(inv)
     centre = ground_xyz[first, :2]  # a ground point of each square
     del key, ij, inv, uniq
-    _, j = cKDTree(centre).query(xyz[:, :2])
+    _, j = cKDTree(centre).query(xyz[:, :2], workers=n_threads)
     return (xyz[:, 2] - zmean[j]).astype(np.float32)
 
 
@@ -104,8 +108,17 @@ def _column_counts(xyz, mask):
     ij = np.floor((xyz[:, :2] - xyz[:, :2].min(axis=0)) / _COLUMN).astype(np.int64)
     key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
     del ij
-    # only the columns holding a masked point
-    wanted = np.isin(key, np.unique(key[mask]))
+    # only the columns holding a masked point: a table over the keys when
+    # they are few (a street: tens of thousands of columns), np.isin when
+    # the scene's extent makes them many (a far outlier)
+    n_keys = int(key.max()) + 1
+    if n_keys <= 4 * len(key):
+        table = np.zeros(n_keys, dtype=bool)
+        table[key[mask]] = True
+        wanted = table[key]
+        del table
+    else:
+        wanted = np.isin(key, np.unique(key[mask]))
     idx = np.flatnonzero(wanted)
     order = idx[np.lexsort((xyz[idx, 2], key[idx]))]
     sk = key[order]
@@ -161,15 +174,17 @@ def _keep(labels, good):
     return out
 
 
-def local_shapes(xyz, nb):
+def local_shapes(xyz, nb, n_threads=1):
     """Linearity, planarity, normal (n, 3), |axis z| and spread of every
-    point."""
-    from skpcd.segmentation._structure_kernels import local_shape
+    point (rows in chunks on ``n_threads`` threads; every row its own)."""
+    from skpcd.segmentation._structure_kernels import local_shape_rows
 
     out = [np.empty(len(xyz), dtype=np.float32) for _ in range(4)]
     normal = np.empty((len(xyz), 3), dtype=np.float32)
     out.insert(2, normal)
-    local_shape(xyz, nb.indptr, nb.indices, *out)
+    parallel_rows(
+        local_shape_rows, len(xyz), n_threads, xyz, nb.indptr, nb.indices, *out
+    )
     return out
 
 
@@ -201,7 +216,7 @@ def find_structures(xyz, height, nb, eps, params, n_jobs=None):
     """Kind of every point: 0 object, 1 facade, 2 wire (int8)."""
     from skpcd.segmentation._structure_kernels import neighbour_share
 
-    lin, plan, normal, axis_z, spread = local_shapes(xyz, nb)
+    lin, plan, normal, axis_z, spread = local_shapes(xyz, nb, effective_threads(n_jobs))
     normal_z = np.abs(normal[:, 2])
     kind = np.zeros(len(xyz), dtype=np.int8)
     # wires: linear, horizontal-ish, thin, high; long pieces
@@ -379,11 +394,12 @@ def segment_structures(xyz, ground_xyz, eps, params, cluster, n_jobs=None):
     if len(xyz) < 3:
         return labels, np.zeros(0, dtype=np.int8), {}
     nb = compute_neighborhoods(xyz, n_neighbors=params["n_neighbors"], n_jobs=n_jobs)
-    height = height_above_ground(xyz, ground_xyz)
+    height = height_above_ground(xyz, ground_xyz, n_threads=effective_threads(n_jobs))
     kind, trunk_points, planar = find_structures(xyz, height, nb, eps, params, n_jobs)
     del height
     objects = kind == 0
     sub = cluster(objects)
+    facade_parts = None  # the components of the facade points, once known
     if (kind == 1).any() and len(sub):
         # clusters of mostly planar points touching a facade (balconies,
         # window reveals, shop signs, roof edges) are part of it
@@ -403,7 +419,13 @@ def segment_structures(xyz, ground_xyz, eps, params, cluster, n_jobs=None):
             keep = ~absorbed[objects]
             objects = kind == 0
             sub = filter_labels(sub[keep])
-        del comp, flat
+        # the facade points are now the components of flat | facade that
+        # touch a facade, so those are their components too, in the same
+        # order (lowest point first): no second search over them
+        rank = np.full(m + 1, -1, dtype=np.int32)
+        rank[:m][touching[:m]] = np.arange(int(touching[:m].sum()))
+        facade_parts = rank[comp], int(touching[:m].sum())
+        del comp, flat, rank
     del planar
     trunks, n_trunks = find_trunks(
         xyz, trunk_points & objects, eps, params["trunk_min_height"], n_jobs
@@ -419,9 +441,12 @@ def segment_structures(xyz, ground_xyz, eps, params, cluster, n_jobs=None):
     kinds = [np.zeros(n_obj, dtype=np.int8)]
     offset = n_obj
     for k in (1, 2):
-        part, n = _components(xyz, kind == k, eps, n_jobs)
+        if k == 1 and facade_parts is not None:
+            part, n = facade_parts
+        else:
+            part, n = _components(xyz, kind == k, eps, n_jobs)
         inside = part >= 0
-        labels[inside] = part[inside] + offset
+        labels[inside] = part[inside].astype(np.int64) + offset
         kinds.append(np.full(n, k, dtype=np.int8))
         offset += n
     info = {
