@@ -26,6 +26,8 @@ from sklearn.base import BaseEstimator, _fit_context
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from skpcd.utils._parallel import effective_threads, parallel_rows
+
 __all__ = ["GROUND_PRESETS", "GroundFilter"]
 
 # Parameters for the kinds of scan; "aerial" are the defaults of
@@ -69,6 +71,14 @@ _MAX_CELLS = 200_000_000
 # Radius, in cells, of the fill of the minimum surface's empty cells before
 # the opening; farther from every point a cell is left out of the opening.
 _FILL_CELLS = 4
+# Work per chunk of a threaded pass at least: cells of the raster for the
+# passes over its rows, points per part of the minimum raster (each part
+# has a raster of its own: at most one cell per point beyond the first).
+_MIN_CELLS = 65536
+_MIN_PART_POINTS = 65536
+# Rows of a band of the threaded opening at least, in rows computed on
+# either side of it (``2 * radius``): at most a quarter of extra rows.
+_BAND_HALOS = 4
 # Steps, in cells, the terrain interpolation looks for ground beyond the
 # opening's largest radius (an object that the opening removes is at most
 # that radius from the ground on its narrow side).
@@ -99,7 +109,7 @@ def reach_cells(filt):
     return 2 + terrain_cells(filt) + 2 * opening_cells(filt) + _FILL_CELLS + 2
 
 
-def _objects(surface, known, radius_max, slope, cell):
+def _objects(surface, known, radius_max, slope, cell, n_threads=1):
     """Cells that the opening flags as objects (and the cells not known).
 
     The opening of radius ``r`` (a disk approximated by an octagon: ``r``
@@ -112,28 +122,24 @@ def _objects(surface, known, radius_max, slope, cell):
     dilation skips them too. A known cell is an object when it drops by more
     than ``slope * r * cell`` from the opening of radius ``r - 1`` to that
     of ``r``.
-    """
-    from skpcd.segmentation._ground_kernels import erode_step
 
-    objects = ~known
-    eroded = surface.copy()
-    previous = surface
-    a, b, tmp = (np.empty_like(surface) for _ in range(3))
-    with np.errstate(invalid="ignore"):
-        for radius in range(1, radius_max + 1):
-            # step s of the octagon is a square when s is even, else a cross
-            erode_step(eroded, (radius - 1) % 2 == 0, tmp, a)
-            eroded, a = a, eroded
-            # the dilation, as the erosion of the negated surface; cells
-            # where the erosion found no point (+inf) take no part (+inf)
-            np.negative(eroded, out=b)
-            b[b == -np.inf] = np.inf
-            for step in range(radius):
-                erode_step(b, step % 2 == 0, tmp, a)
-                a, b = b, a
-            opened = -b
-            objects |= previous - opened > slope * radius * cell
-            previous = opened
+    On ``n_threads`` threads, each takes a band of rows and computes it
+    with ``2 * radius_max`` rows on either side
+    (:func:`~skpcd.segmentation._ground_kernels.opening_objects_rows`): the
+    same cells as on one thread, at the cost of those extra rows, so a band
+    is at least ``_BAND_HALOS`` times as high (a thin raster runs on one
+    thread).
+    """
+    from skpcd.segmentation._ground_kernels import opening_objects_rows
+
+    ny = surface.shape[0]
+    objects = np.empty(surface.shape, dtype=bool)
+    band = max(-(-ny // n_threads), _BAND_HALOS * 2 * radius_max)
+    parallel_rows(
+        opening_objects_rows, ny, n_threads,
+        surface, known, radius_max, float(slope), float(cell), objects,
+        min_chunk=band,
+    )  # fmt: skip
     return objects
 
 
@@ -152,14 +158,23 @@ def _slope(dem, cell):
 _MAX_INDEX = 2**53
 
 
-def _cell_indices(xyz, cell):
-    """The raster of a scene: its corner, its size in cells and the (col,
-    row) cell of every point; a ValueError when the coordinates are not
-    finite or span more cells than can be indexed."""
-    if not np.isfinite(xyz).all():
+def _raster(xyz, cell, n_threads=1):
+    """The raster of a scene: its corner and its size in cells; a
+    ValueError when the coordinates are not finite or span more cells than
+    can be indexed."""
+    from skpcd.segmentation._ground_kernels import extent_parts
+
+    n_parts = min(n_threads, max(1, len(xyz) // _MIN_PART_POINTS))
+    bounds = np.linspace(0, len(xyz), n_parts + 1).astype(np.int64)
+    parts = np.empty((n_parts, 5))
+    parallel_rows(extent_parts, n_parts, n_threads, xyz, bounds, parts, min_chunk=1)
+    if not parts[:, 4].all():
         raise ValueError("X contains NaN or infinite coordinates.")
-    lo = xyz[:, :2].min(axis=0)
-    extent = xyz[:, :2].max(axis=0) - lo
+    lo, hi = parts[:, :2].min(axis=0), parts[:, 2:4].max(axis=0)
+    # a zero may be -0.0 or 0.0: the sign numpy's reductions choose
+    for k in np.flatnonzero((lo == 0) | (hi == 0)):
+        lo[k], hi[k] = xyz[:, k].min(), xyz[:, k].max()
+    extent = hi - lo
     with np.errstate(over="ignore", invalid="ignore"):
         n = np.floor(extent / cell) + 1
     if not (np.isfinite(n).all() and (n <= _MAX_INDEX).all()):
@@ -170,9 +185,77 @@ def _cell_indices(xyz, cell):
             "or use a larger cell"
         )
     nx, ny = (int(v) for v in n)
-    cells = np.floor((xyz[:, :2] - lo) / cell).astype(np.int64)
-    np.clip(cells, 0, [nx - 1, ny - 1], out=cells)
+    return lo, nx, ny
+
+
+def _cell_indices(xyz, cell, n_threads=1):
+    """The raster of a scene (:func:`_raster`) and the (col, row) cell of
+    every point."""
+    from skpcd.segmentation._ground_kernels import cell_indices_rows
+
+    lo, nx, ny = _raster(xyz, cell, n_threads)
+    cells = np.empty((len(xyz), 2), dtype=np.int64)
+    parallel_rows(
+        cell_indices_rows, len(xyz), n_threads, xyz, lo[0], lo[1], cell, nx, ny,
+        cells,
+    )  # fmt: skip
     return lo, nx, ny, cells
+
+
+def minimum_raster(xyz, origin, cell, size, start, shape, n_threads):
+    """Lowest z of the points in the cells of a window of a raster.
+
+    Parameters
+    ----------
+    xyz : ndarray of shape (n_points, 3)
+        The points, C-contiguous.
+    origin : (float, float)
+        x and y of the raster's corner.
+    cell : float
+        Cell size.
+    size : (int, int)
+        Columns and rows of the raster.
+    start : (int, int)
+        Column and row of the window's first cell.
+    shape : (int, int)
+        Rows and columns of the window.
+    n_threads : int
+        Threads: the points are cut into as many parts, each with a raster
+        of its own (if the points are at least ``_MIN_PART_POINTS`` per part
+        and per cell), merged by the minimum in the order of the parts: the
+        raster of one pass over the points in order, bit for bit.
+
+    Returns
+    -------
+    zmin : ndarray of shape ``shape``
+        +inf in the cells without a point.
+    """
+    from skpcd.segmentation._ground_kernels import (
+        cell_minimum_parts,
+        merge_minimum,
+    )
+
+    n_cells = int(shape[0]) * int(shape[1])
+    n_parts = min(n_threads, max(1, len(xyz) // max(n_cells, _MIN_PART_POINTS)))
+    bounds = np.linspace(0, len(xyz), n_parts + 1).astype(np.int64)
+    zmin = np.full(shape, np.inf)
+    others = np.full((n_parts - 1, *shape), np.inf)
+    args = (float(origin[0]), float(origin[1]), float(cell), *size, *start)
+    parallel_rows(
+        cell_minimum_parts, n_parts, n_threads, xyz, bounds, *args, zmin, others,
+        min_chunk=1,
+    )  # fmt: skip
+    if n_parts > 1:
+        parallel_rows(
+            merge_minimum, shape[0], n_threads, zmin, others,
+            min_chunk=_raster_rows(zmin),
+        )  # fmt: skip
+    return zmin
+
+
+def _raster_rows(grid):
+    """Fewest rows per chunk of a threaded pass over a raster."""
+    return max(1, _MIN_CELLS // max(grid.shape[1], 1))
 
 
 def _islands(cells, reach):
@@ -301,6 +384,15 @@ class GroundFilter(BaseEstimator):
         CSF only: largest number of simulation steps.
     time_step : float, default=0.65
         CSF only: step of the simulation.
+    n_jobs : int, default=None
+        Threads for SMRF: the passes over the points (the minimum raster,
+        the test of each point against the DEM) in parts of the points, the
+        passes over the raster (low noise, fill, opening, interpolation) in
+        bands of rows; the result is the same, bit for bit, for every
+        ``n_jobs``. None means 1 (unless in a :func:`joblib.parallel_config`
+        context), -1 all cores. CSF runs on one thread whatever ``n_jobs``
+        says: the package's OpenMP threads change its result from run to
+        run (see ``skpcd.segmentation._csf``).
 
     Attributes
     ----------
@@ -418,6 +510,7 @@ class GroundFilter(BaseEstimator):
         "slope_smooth": ["boolean"],
         "iterations": [Interval(Integral, 1, None, closed="left")],
         "time_step": [Interval(Real, 0, None, closed="neither")],
+        "n_jobs": [Integral, None],
     }
 
     def __init__(
@@ -434,6 +527,7 @@ class GroundFilter(BaseEstimator):
         slope_smooth=True,
         iterations=500,
         time_step=0.65,
+        n_jobs=None,
     ):
         self.method = method
         self.cell = cell
@@ -446,6 +540,7 @@ class GroundFilter(BaseEstimator):
         self.slope_smooth = slope_smooth
         self.iterations = iterations
         self.time_step = time_step
+        self.n_jobs = n_jobs
 
     def _xyz(self, X, reset):
         from skpcd.segmentation._clusters import refuse_sequence
@@ -460,45 +555,58 @@ class GroundFilter(BaseEstimator):
         return np.ascontiguousarray(X[:, :3])
 
     def _minimum_surface(self, xyz):
-        from skpcd.segmentation._ground_kernels import cell_minimum
-
-        lo, nx, ny, _ = _cell_indices(xyz, float(self.cell))
+        # the threads of the running fit: self._n_threads
+        cell = float(self.cell)
+        lo, nx, ny = _raster(xyz, cell, self._n_threads)
         if nx * ny > _MAX_CELLS:
             raise ValueError(
                 f"the scene needs {nx * ny} cells of {self.cell} (more than "
                 f"{_MAX_CELLS}); use a larger cell"
             )
-        zmin = np.full((ny, nx), np.inf)
-        cell_minimum(xyz, lo[0], lo[1], float(self.cell), nx, ny, 0, 0, zmin)
+        zmin = minimum_raster(
+            xyz, lo, cell, (nx, ny), (0, 0), (ny, nx), self._n_threads
+        )
         return lo, zmin
 
-    def _drop_low_noise(self, zmin, known):
+    def _drop_low_noise(self, zmin, known, n_threads):
         """Unknown from now: cells far below the median of their 8 neighbours."""
-        from skpcd.segmentation._ground_kernels import drop_low_noise
+        from skpcd.segmentation._ground_kernels import drop_low_noise_rows
 
         if self.low_noise is None:
             return known
         out = np.empty_like(known)
-        drop_low_noise(zmin, known, float(self.low_noise), out)
+        parallel_rows(
+            drop_low_noise_rows, len(zmin), n_threads,
+            zmin, known, float(self.low_noise), out,
+            min_chunk=_raster_rows(zmin),
+        )  # fmt: skip
         return out
 
-    def _terrain(self, zmin):
+    def _terrain(self, zmin, n_threads):
         """The object cells and the terrain model of a minimum surface."""
         from skpcd.segmentation._ground_kernels import (
-            fill_surface,
-            interpolate_terrain,
+            fill_surface_rows,
+            interpolate_terrain_rows,
         )
 
-        known = self._drop_low_noise(zmin, np.isfinite(zmin))
+        rows = _raster_rows(zmin)
+        known = self._drop_low_noise(zmin, np.isfinite(zmin), n_threads)
         surface = np.empty_like(zmin)
-        fill_surface(zmin, known, _FILL_CELLS, surface)
+        parallel_rows(
+            fill_surface_rows, len(zmin), n_threads, zmin, known, _FILL_CELLS,
+            surface, min_chunk=rows,
+        )  # fmt: skip
         objects = _objects(
-            surface, known, opening_cells(self), float(self.slope), float(self.cell)
-        )
+            surface, known, opening_cells(self), float(self.slope), float(self.cell),
+            n_threads,
+        )  # fmt: skip
         reach = terrain_cells(self)
         near = ndimage.maximum_filter(known, size=2 * reach + 1, mode="constant")
         dem = np.empty_like(zmin)
-        interpolate_terrain(zmin, ~objects, surface, near, reach, dem)
+        parallel_rows(
+            interpolate_terrain_rows, len(zmin), n_threads,
+            zmin, ~objects, surface, near, reach, dem, min_chunk=rows,
+        )  # fmt: skip
         return objects, dem
 
     @_fit_context(prefer_skip_nested_validation=True)
@@ -517,24 +625,26 @@ class GroundFilter(BaseEstimator):
         self : object
             The fitted filter.
         """
-        from skpcd.segmentation._ground_kernels import cell_minimum
-
         xyz = self._xyz(X, reset=True)
+        n_threads = self._n_threads = effective_threads(self.n_jobs)
         if self.method == "csf":
             return self._fit_csf(xyz)
         if type(self)._minimum_surface is not GroundFilter._minimum_surface:
             # a window of a larger raster (the tiled segmentation)
             lo, zmin = self._minimum_surface(xyz)
-            self._fit_patches(xyz, lo, [(0, 0, *self._terrain(zmin))])
+            patch = (0, 0, *self._terrain(zmin, n_threads))
+            self._fit_patches(xyz, lo, [patch], n_threads)
             return self
         cell = float(self.cell)
-        lo, nx, ny, cells = _cell_indices(xyz, cell)
+        lo, nx, ny = _raster(xyz, cell, n_threads)
         reach = reach_cells(self) + 1
         if nx * ny <= len(xyz):
             # no larger than the points: the whole raster, no island search
             rects, label = np.array([[0, 0, nx - 1, ny - 1]]), None
         else:
+            _, _, _, cells = _cell_indices(xyz, cell, n_threads)
             rects, label = _islands(cells, reach)
+            del cells
         # each island's filter on its rectangle grown by twice the reach
         # gives the whole raster's answer on the rectangle grown by the
         # reach, which holds every cell with a point within the reach; the
@@ -551,9 +661,9 @@ class GroundFilter(BaseEstimator):
                 f"{self.cell} (more than {_MAX_CELLS}); use a larger cell"
             )
         if len(rects) == 1:
-            zmin = np.full((ny, nx), np.inf)
-            cell_minimum(xyz, lo[0], lo[1], cell, nx, ny, 0, 0, zmin)
-            self._fit_patches(xyz, lo, [(0, 0, *self._terrain(zmin))])
+            zmin = minimum_raster(xyz, lo, cell, (nx, ny), (0, 0), (ny, nx), n_threads)
+            patch = (0, 0, *self._terrain(zmin, n_threads))
+            self._fit_patches(xyz, lo, [patch], n_threads)
             return self
         order = np.argsort(label, kind="stable")
         bounds = np.searchsorted(label[order], np.arange(len(rects) + 1))
@@ -564,9 +674,11 @@ class GroundFilter(BaseEstimator):
         for i, ((c0, r0), (c1, r1)) in enumerate(window):
             mine = order[bounds[i] : bounds[i + 1]]
             pts = np.ascontiguousarray(xyz[mine])
-            zmin = np.full((r1 - r0 + 1, c1 - c0 + 1), np.inf)
-            cell_minimum(pts, lo[0], lo[1], cell, nx, ny, c0, r0, zmin)
-            objects, dem = self._terrain(zmin)
+            zmin = minimum_raster(
+                pts, lo, cell, (nx, ny), (c0, r0), (r1 - r0 + 1, c1 - c0 + 1),
+                n_threads,
+            )  # fmt: skip
+            objects, dem = self._terrain(zmin, n_threads)
             k0 = np.maximum(rects[i, :2] - reach, 0)
             k1 = np.minimum(rects[i, 2:] + reach, [nx - 1, ny - 1])
             part = (
@@ -574,7 +686,7 @@ class GroundFilter(BaseEstimator):
                 slice(k0[0] - c0, k1[0] - c0 + 1),
             )
             patches.append((int(k0[0]), int(k0[1]), objects[part], dem[part]))
-            ground[mine] = self._ground_patch(patches[-1], pts)
+            ground[mine] = self._ground_patch(patches[-1], pts, n_threads)
         # patches (c0, r0, objects, dem) of the raster of _shape cells, NaN
         # and objects elsewhere
         self._patches = patches
@@ -596,7 +708,7 @@ class GroundFilter(BaseEstimator):
             time_step=self.time_step,
         )
         cell = float(self.cell)
-        lo, nx, ny, cells = _cell_indices(xyz, cell)
+        lo, nx, ny, cells = _cell_indices(xyz, cell, self._n_threads)
         if nx * ny <= len(xyz):
             rects, label = np.array([[0, 0, nx - 1, ny - 1]]), None
         else:  # the DEM of the occupied parts only (see GroundFilter.fit)
@@ -639,13 +751,13 @@ class GroundFilter(BaseEstimator):
         self.ground_ = ground
         return self
 
-    def _fit_patches(self, xyz, lo, patches):
+    def _fit_patches(self, xyz, lo, patches, n_threads):
         """Store the fitted raster of one patch: the whole raster, or the
         tile's window."""
         self.origin_ = lo
         self._shape = None
         self._patches = patches
-        self.ground_ = self._ground(xyz)
+        self.ground_ = self._ground(xyz, n_threads)
 
     def _dense(self, k, fill):
         check_is_fitted(self)
@@ -690,14 +802,14 @@ class GroundFilter(BaseEstimator):
         """
         check_is_fitted(self)
         xyz = self._xyz(X, reset=False)
-        return xyz[:, 2] - self._sample(xyz, slope=False)
+        return xyz[:, 2] - self._sample(xyz, False, effective_threads(self.n_jobs))
 
-    def _sample(self, xyz, slope):
+    def _sample(self, xyz, slope, n_threads):
         """The DEM (or its slope) interpolated at the points."""
         if self._shape is None:
             dem = self._patches[0][3]
             grid = _slope(dem, float(self.cell)) if slope else dem
-            return self._at(grid, xyz)
+            return self._at(grid, xyz, n_threads)
         out = np.full(len(xyz), np.nan)
         if not np.isfinite(xyz[:, :2]).all():
             raise ValueError("X contains NaN or infinite coordinates.")
@@ -712,51 +824,80 @@ class GroundFilter(BaseEstimator):
                 & (u[:, 1] < r0 + h)
             )
             if len(mine):
-                out[mine] = self._patch_at(c0, r0, dem, xyz[mine], slope)
+                out[mine] = self._patch_at(c0, r0, dem, xyz[mine], slope, n_threads)
         return out
 
-    def _patch_at(self, c0, r0, dem, xyz, slope):
-        from skpcd.segmentation._ground_kernels import bilinear
+    def _patch_frame(self, c0, r0):
+        """The raster frame of a patch of the islands' raster (see
+        :meth:`_frame`)."""
+        ny, nx = self._shape
+        return (*(float(v) for v in self.origin_), nx, ny, c0, r0)
+
+    def _patch_at(self, c0, r0, dem, xyz, slope, n_threads):
+        from skpcd.segmentation._ground_kernels import bilinear_rows
 
         grid = _slope(dem, float(self.cell)) if slope else dem
         out = np.empty(len(xyz))
-        ny, nx = self._shape
-        x0, y0 = self.origin_
-        bilinear(xyz, x0, y0, float(self.cell), nx, ny, c0, r0, grid, out)
+        x0, y0, nx, ny, _, _ = self._patch_frame(c0, r0)
+        parallel_rows(
+            bilinear_rows, len(xyz), n_threads,
+            xyz, x0, y0, float(self.cell), nx, ny, c0, r0, grid, out,
+        )  # fmt: skip
         return out
 
-    def _ground_patch(self, patch, xyz):
-        c0, r0, _, dem = patch
-        dz = np.abs(xyz[:, 2] - self._patch_at(c0, r0, dem, xyz, False))
-        return dz <= self.threshold + self.scalar * self._patch_at(
-            c0, r0, dem, xyz, True
-        )
+    def _classify(self, xyz, frame, dem, n_threads):
+        """SMRF's test of the points against a DEM (and its slope) whose
+        cells are placed by ``frame`` (see :meth:`_frame`)."""
+        from skpcd.segmentation._ground_kernels import classify_rows
 
-    def _at(self, grid, xyz):
-        from skpcd.segmentation._ground_kernels import bilinear
+        x0, y0, nx, ny, c0, r0 = frame
+        out = np.empty(len(xyz), dtype=bool)
+        parallel_rows(
+            classify_rows, len(xyz), n_threads,
+            xyz, x0, y0, float(self.cell), nx, ny, c0, r0,
+            dem, _slope(dem, float(self.cell)),
+            float(self.threshold), float(self.scalar), out,
+        )  # fmt: skip
+        return out
+
+    def _ground_patch(self, patch, xyz, n_threads):
+        c0, r0, _, dem = patch
+        return self._classify(xyz, self._patch_frame(c0, r0), dem, n_threads)
+
+    def _frame(self, grid):
+        """Where the cells of ``grid``, the raster of the one patch, lie:
+        ``(x0, y0, nx, ny, c0, r0)``, the corner and cells of the whole
+        raster, and the first cell of ``grid`` in it."""
+        ny, nx = grid.shape
+        return (*(float(v) for v in self.origin_), nx, ny, 0, 0)
+
+    def _at(self, grid, xyz, n_threads):
+        from skpcd.segmentation._ground_kernels import bilinear_rows
 
         out = np.empty(len(xyz))
-        ny, nx = grid.shape
-        x0, y0 = self.origin_
-        bilinear(xyz, x0, y0, float(self.cell), nx, ny, 0, 0, grid, out)
+        x0, y0, nx, ny, c0, r0 = self._frame(grid)
+        parallel_rows(
+            bilinear_rows, len(xyz), n_threads,
+            xyz, x0, y0, float(self.cell), nx, ny, c0, r0, grid, out,
+        )  # fmt: skip
         return out
 
-    def _ground(self, xyz):
+    def _ground(self, xyz, n_threads):
         if self.method == "csf":
             dem = (
-                self._at(self._patches[0][3], xyz)
+                self._at(self._patches[0][3], xyz, n_threads)
                 if self._shape is None
-                else self._sample(xyz, slope=False)
+                else self._sample(xyz, False, n_threads)
             )
             with np.errstate(invalid="ignore"):
                 return np.abs(xyz[:, 2] - dem) <= float(self.threshold)
         if self._shape is not None:
-            dz = np.abs(xyz[:, 2] - self._sample(xyz, slope=False))
-            return dz <= self.threshold + self.scalar * self._sample(xyz, slope=True)
+            dz = np.abs(xyz[:, 2] - self._sample(xyz, False, n_threads))
+            return dz <= self.threshold + self.scalar * self._sample(
+                xyz, True, n_threads
+            )
         dem = self._patches[0][3]
-        slope = _slope(dem, float(self.cell))
-        dz = np.abs(xyz[:, 2] - self._at(dem, xyz))
-        return dz <= self.threshold + self.scalar * self._at(slope, xyz)
+        return self._classify(xyz, self._frame(dem), dem, n_threads)
 
     def predict(self, X):
         """Which points are ground.
@@ -772,7 +913,7 @@ class GroundFilter(BaseEstimator):
             True for ground points.
         """
         check_is_fitted(self)
-        return self._ground(self._xyz(X, reset=False))
+        return self._ground(self._xyz(X, reset=False), effective_threads(self.n_jobs))
 
     def fit_predict(self, X, y=None):
         """Fit the terrain model of a scene and return its ground points.

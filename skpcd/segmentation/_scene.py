@@ -124,7 +124,8 @@ def segment_scene(
         through the package ``cloth-simulation-filter``; "aerial" and
         "mobile": SMRF), a filter of your own
         (cloned), or None to keep every point. With ``tile_size`` only
-        SMRF (see Notes).
+        SMRF (see Notes). The filter runs on the threads of ``n_jobs``
+        (one of your own keeps its ``n_jobs`` unless None).
     method : {"dbscan", "euclidean"}, default="dbscan"
         :class:`AutoEpsDBSCAN` (eps estimated from the non-ground points
         unless given) or :class:`EuclideanClusters` (every point core; eps
@@ -310,6 +311,8 @@ def segment_scene(
             if isinstance(ground, str)
             else clone(ground)
         )
+        if filt.n_jobs is None:
+            filt.set_params(n_jobs=n_jobs)
     if tile_size is not None:
         from skpcd.segmentation._tiling import segment_tiled
 

@@ -23,8 +23,7 @@ from skpcd.segmentation._dbscan import (
     eps_from_knee,
     sample_queries,
 )
-from skpcd.segmentation._ground import GroundFilter, reach_cells
-from skpcd.segmentation._ground_kernels import bilinear, cell_minimum
+from skpcd.segmentation._ground import GroundFilter, minimum_raster, reach_cells
 from skpcd.segmentation._spill import (
     TiledScene,
     check_chunk_size,
@@ -52,15 +51,14 @@ def _window_filter(base):
 
         def _minimum_surface(self, xyz):
             x0, y0, nx, ny, c0, r0, wx, wy = self._raster
-            zmin = np.full((wy, wx), np.inf)
-            cell_minimum(xyz, x0, y0, float(self.cell), nx, ny, c0, r0, zmin)
+            zmin = minimum_raster(
+                xyz, (x0, y0), float(self.cell), (nx, ny), (c0, r0), (wy, wx),
+                self._n_threads,
+            )  # fmt: skip
             return np.array([x0 + c0 * self.cell, y0 + r0 * self.cell]), zmin
 
-        def _at(self, grid, xyz):
-            x0, y0, nx, ny, c0, r0, _, _ = self._raster
-            out = np.empty(len(xyz))
-            bilinear(xyz, x0, y0, float(self.cell), nx, ny, c0, r0, grid, out)
-            return out
+        def _frame(self, grid):
+            return self._raster[:6]
 
     return _WindowGroundFilter(**base.get_params())
 
@@ -95,7 +93,7 @@ def _ground_prepare(xyz, index, ground, tile, grid, lo, nxy, cell, reach):
 
 def _ground_tile(xyz, owned, raster, filt, n_threads):
     """Ground flags of the owned points of a buffered tile."""
-    est = _window_filter(filt)
+    est = _window_filter(filt).set_params(n_jobs=n_threads)
     est._raster = raster
     if len(xyz) == 0:
         return np.zeros(0, dtype=bool)

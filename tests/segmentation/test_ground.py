@@ -259,3 +259,72 @@ def test_two_columns_refused_everywhere():
         segment_scene(X, ground=None)
     with pytest.raises(ValueError, match=r"NaN|infinity"):
         GroundFilter().fit([[0.0, 0, np.nan], [1, 1, 1]])
+
+
+def _big_scene():
+    # 300 m x 300 m at 3 points per m2, a building, cars: about 280 k points,
+    # 90 k cells of 1 m (and 360 k of 0.5 m), enough to cut every pass into
+    # parts of points or bands of rows with the default chunk sizes
+    rng = np.random.default_rng(11)
+    ground = _terrain(270_000, 300, 12)
+    boxes = [
+        _box([x, y, 1.0], [x + w, y + w, 1.0 + w / 2], 1500, i, 0.05 * x + 1.0)
+        for i, (x, y, w) in enumerate(rng.uniform([10, 10, 2], [280, 280, 14], (8, 3)))
+    ]
+    return np.vstack([ground, *boxes])
+
+
+def _outputs(gf, X, Q):
+    gf.fit(X)
+    return [gf.ground_, gf.dem_, gf.objects_, gf.origin_, gf.height(Q), gf.predict(Q)]
+
+
+def _assert_bit_identical(a, b):
+    for x, y in zip(a, b, strict=True):
+        assert x.dtype == y.dtype and x.shape == y.shape
+        assert x.tobytes() == y.tobytes()
+
+
+@pytest.mark.parametrize("preset", ["aerial", "mobile"])
+def test_n_jobs_gives_the_same_bits(preset):
+    X = _big_scene()
+    Q = np.column_stack(
+        [np.random.default_rng(0).uniform(-10, 310, (20_000, 2)), np.zeros(20_000)]
+    )
+    params = GROUND_PRESETS[preset]
+    one = _outputs(GroundFilter(**params, n_jobs=1), X, Q)
+    _assert_bit_identical(one, _outputs(GroundFilter(**params, n_jobs=2), X, Q))
+
+
+def test_n_jobs_gives_the_same_bits_in_small_chunks(monkeypatch):
+    # many parts, bands and chunks of every size (3 threads: uneven ones), on
+    # islands (a far group of points) and on zeros of both signs
+    import skpcd.segmentation._ground as module
+
+    ground, objects = _scene(5)
+    far = ground[:3000] + np.array([500.0, 0.0, 3.0])
+    X = np.vstack([ground, objects, far])
+    X[::5, 2] = np.where(X[::5, 2] < 0, -0.0, 0.0)
+    X[::7, 0] = 0.0
+    X[1::7, 0] = -0.0
+    Q = np.column_stack(
+        [np.random.default_rng(1).uniform(-10, 560, (5000, 2)), np.zeros(5000)]
+    )
+    params = {"cell": 0.5, "window": 4.0}
+    one = _outputs(GroundFilter(**params, n_jobs=1), X, Q)
+    monkeypatch.setattr(module, "_MIN_CELLS", 50)
+    monkeypatch.setattr(module, "_MIN_PART_POINTS", 500)
+    monkeypatch.setattr(module, "_BAND_HALOS", 1)
+    for n_jobs in (2, 3):
+        _assert_bit_identical(
+            one, _outputs(GroundFilter(**params, n_jobs=n_jobs), X, Q)
+        )
+
+
+def test_csf_ignores_n_jobs():
+    ground, objects = _scene(6)
+    X = np.vstack([ground, objects])
+    one = GroundFilter(**GROUND_PRESETS["csf"]).fit(X)
+    two = GroundFilter(**GROUND_PRESETS["csf"], n_jobs=2).fit(X)
+    np.testing.assert_array_equal(one.ground_, two.ground_)
+    np.testing.assert_array_equal(one.dem_, two.dem_)
