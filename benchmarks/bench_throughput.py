@@ -472,7 +472,8 @@ def write(results, out):
             "",
             "identify: fit on all segments, then predict on the same segments; "
             "best of the rounds (fit and predict each), fresh process each; "
-            "seg/s = segments per second",
+            "seg/s = segments per second; peak MB: VmHWM above the process after "
+            "loading the data and a warm-up fit",
             f"{'data':<8}{'pipeline':<12}{'n_jobs':>7}{'segments':>9}{'points':>10}"
             f"{'fit s':>8}{'fit seg/s':>10}{'pred s':>8}{'pred seg/s':>11}"
             f"{'peak MB':>8}",
@@ -509,11 +510,11 @@ def write(results, out):
             "process (wall time from start to exit), peak RSS of the process "
             f"(ru_maxrss; the driver's floor {results.get('driver_peak_mb', 0):.0f} "
             f"MB), cap {results.get('cap_gb')} GB; best of the rounds",
-            f"{'size':>5}{'points':>10}  {'job':<13}{'seconds':>8}{'Mpts/s':>8}"
+            f"{'size':>5}{'points':>10}  {'job':<22}{'seconds':>8}{'Mpts/s':>8}"
             f"{'peak MB':>8}{'B/pt':>6}{'eps':>7}  stages (s) / error",
         ]
         for r in seg["best"]:
-            head = f"{r['size']:>4g}M{r.get('points', 0):>10}  {r['tool']:<13}"
+            head = f"{r['size']:>4g}M{r.get('points', 0):>10}  {r['tool']:<22}"
             if "error" in r:
                 lines.append(
                     f"{head}{r['seconds']:>8.1f}{'-':>8}{r['peak_mb']:>8.0f}{'':>13}"
