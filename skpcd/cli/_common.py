@@ -11,6 +11,9 @@ import numpy as np
 
 from skpcd.exceptions import PointCloudFileError
 
+# What --quiet silences.
+QUIET_HELP = "no progress bars, no line saying that numba kernels compile"
+
 # Seconds to wait for a Dask scheduler before giving up.
 SCHEDULER_TIMEOUT = 10
 
@@ -42,14 +45,19 @@ def run(command, func, args):
     Bad input files end with one line on stderr and status 1; an output
     that cannot be written (full disk, no permission) likewise; Ctrl-C and
     SIGTERM end with one line and status 130 / 143, after the partial
-    outputs are removed.
+    outputs are removed. A first run that compiles numba kernels says so on
+    stderr, once (:func:`~skpcd.utils._compile.compile_notice`; not with
+    ``--quiet``).
     """
+    from skpcd.utils._compile import compile_notice  # imports numba: not for --help
+
     previous = signal.getsignal(signal.SIGTERM)
     in_main = _is_main_thread()
     if in_main:
         signal.signal(signal.SIGTERM, _raise_terminated)
     try:
-        with warnings.catch_warnings():
+        quiet = bool(getattr(args, "quiet", False))
+        with warnings.catch_warnings(), compile_notice(f"skpcd {command}", quiet=quiet):
             warnings.showwarning = _show_warning
             return func(args)
     except (PointCloudFileError, FileExistsError) as exc:
@@ -98,7 +106,7 @@ def add_output_options(parser):
         action="store_true",
         help="replace an output written by an earlier run (never an input)",
     )
-    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.add_argument("--quiet", action="store_true", help=QUIET_HELP)
 
 
 def add_scheduler(parser):

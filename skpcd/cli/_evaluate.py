@@ -1,12 +1,12 @@
 """``skpcd evaluate [FOLDER]``: cross-validate a pipeline; ``skpcd score
 MODEL FOLDER``: how a saved model does on labelled segments."""
 
-import sys
 import time
 
 import numpy as np
 
 from skpcd.cli._common import (
+    QUIET_HELP,
     CommandError,
     add_n_jobs,
     add_skip_unreadable,
@@ -129,15 +129,7 @@ def simulated_data(name, n_per_class, random_state=0, n_jobs=None):
         clouds, labels = make_urban_objects(n_per_class=n, random_state=random_state)
         return clouds, labels, source
     from skpcd.datasets import make_street_objects
-    from skpcd.datasets._street import kernels_cached
 
-    if not kernels_cached():
-        print(
-            "skpcd evaluate: compiling the street simulator's numba kernels "
-            "(once per installation, about a minute)",
-            file=sys.stderr,
-            flush=True,
-        )
     clouds, labels = make_street_objects(
         n,
         scanner=scanner,
@@ -200,7 +192,7 @@ def add_parsers(sub):
     )
     add_n_jobs(ev)
     add_skip_unreadable(ev)
-    ev.add_argument("--quiet", action="store_true", help="no progress bars")
+    ev.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     ev.set_defaults(func=run_evaluate)
 
     sc = sub.add_parser(
@@ -214,7 +206,7 @@ def add_parsers(sub):
         "--labels", help="CSV of file,label rows (default: FOLDER/labels.csv)"
     )
     add_skip_unreadable(sc)
-    sc.add_argument("--quiet", action="store_true", help="no progress bars")
+    sc.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     add_trust_pickle(sc)
     sc.set_defaults(func=run_score)
     return ev, sc

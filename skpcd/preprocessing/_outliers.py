@@ -17,6 +17,7 @@ from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import validate_data
 
 from skpcd.preprocessing._neighbors import compute_neighborhoods
+from skpcd.utils._compile import entry_point
 from skpcd.utils._validation import refuse_sequence
 
 __all__ = ["RadiusOutlierFilter", "StatisticalOutlierFilter"]
@@ -36,6 +37,7 @@ def _xyz(estimator, X):
 class _OutlierFilter(OutlierMixin, BaseEstimator):
     """fit_predict as scikit-learn's outlier detectors: +1 inlier, -1 outlier."""
 
+    @entry_point
     def fit_predict(self, X, y=None):
         """Flag the outliers of a cloud.
 
@@ -133,6 +135,7 @@ class StatisticalOutlierFilter(_OutlierFilter):
         self.n_jobs = n_jobs
 
     @_fit_context(prefer_skip_nested_validation=True)
+    @entry_point
     def fit(self, X, y=None):
         """Flag the outliers of a cloud.
 
@@ -232,6 +235,7 @@ class RadiusOutlierFilter(_OutlierFilter):
         self.n_jobs = n_jobs
 
     @_fit_context(prefer_skip_nested_validation=True)
+    @entry_point
     def fit(self, X, y=None):
         """Flag the outliers of a cloud.
 

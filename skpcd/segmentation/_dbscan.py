@@ -22,6 +22,7 @@ from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import check_is_fitted
 
 from skpcd.segmentation._clusters import check_scene, grid_dbscan
+from skpcd.utils._compile import entry_point
 from skpcd.utils._parallel import effective_threads
 
 __all__ = ["AutoEpsDBSCAN", "estimate_eps", "plot_eps_curve"]
@@ -91,6 +92,7 @@ def _fit_knee(k, mean, degree):
     return poly, float(knee), float(poly(knee))
 
 
+@entry_point
 def estimate_eps(
     points,
     *,
@@ -351,6 +353,7 @@ class AutoEpsDBSCAN(ClusterMixin, BaseEstimator):
         return eps_from_knee(knee_distance, self.eps_scale)
 
     @_fit_context(prefer_skip_nested_validation=True)
+    @entry_point
     def fit(self, X, y=None):
         """Estimate eps (unless given) and cluster one cloud.
 

@@ -22,6 +22,7 @@ template) still works: ``fit_transform`` then calls that ``transform``.
 
 from sklearn.base import BaseEstimator, TransformerMixin, _fit_context
 
+from skpcd.utils._compile import entry_point
 from skpcd.utils._parallel import map_batches
 from skpcd.utils._validation import check_point_clouds
 
@@ -106,8 +107,11 @@ class CloudTransformer(TransformerMixin, BaseEstimator):
         """
         return self._map_batches(self._validate(X))
 
+    @entry_point
     def _map_batches(self, clouds):
-        """``_transform_batch`` over batches of validated clouds."""
+        """``_transform_batch`` over batches of validated clouds (a first
+        call that compiles kernels says so on stderr, see
+        :mod:`skpcd.utils._compile`)."""
         return map_batches(
             self._transform_batch,
             clouds,

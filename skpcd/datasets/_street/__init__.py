@@ -22,21 +22,3 @@ __all__ = [
     "make_street_objects",
     "make_street_scene",
 ]
-
-
-def kernels_cached():
-    """Whether numba's cache holds the compiled scan kernel.
-
-    False on the first use after an installation (or with an empty
-    ``NUMBA_CACHE_DIR``): the first scan then compiles the kernels, for
-    about a minute (the source of the kernels changed: again). True when
-    they are already loaded in this process.
-    """
-    from skpcd.datasets._street._raycast import simulate
-
-    if simulate.signatures:
-        return True
-    try:  # the index lists the compiled versions, empty when stale or absent
-        return bool(simulate._cache._cache_file._load_index())
-    except Exception:  # numba's private layout changed: do not guess
-        return True

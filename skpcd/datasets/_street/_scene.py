@@ -27,6 +27,7 @@ from skpcd.datasets._street._scanners import (
     resolve_pattern,
     scan,
 )
+from skpcd.utils._compile import entry_point
 
 __all__ = [
     "SCAN_PATTERNS",
@@ -90,6 +91,7 @@ _SCENE_PARAMS = {
 
 
 @validate_params(_SCENE_PARAMS, prefer_skip_nested_validation=True)
+@entry_point
 def make_street_scene(
     length=100.0,
     *,
@@ -326,6 +328,7 @@ def _attach_ground(obj, base_z, ground_sorted, ground_x, margin):
     },
     prefer_skip_nested_validation=True,
 )
+@entry_point
 def make_street_objects(
     n_per_class=40,
     *,
