@@ -74,7 +74,7 @@ _FILL_CELLS = 4
 # Work per chunk of a threaded pass at least: cells of the raster for the
 # passes over its rows, points per part of the minimum raster (each part
 # has a raster of its own: at most one cell per point beyond the first).
-_MIN_CELLS = 65536
+_MIN_CELLS = 16384
 _MIN_PART_POINTS = 65536
 # Rows of a band of the threaded opening at least, in rows computed on
 # either side of it (``2 * radius``): at most a quarter of extra rows.
