@@ -81,7 +81,7 @@ def test_the_same_points_for_every_thread_count_and_as_the_lexsort():
 
     rng = np.random.default_rng(3)
     # centimetre coordinates: many points tie at the same distance to a centre
-    pts = np.round(rng.uniform(0, 30, (300_000, 3)), 2) + [5e5, 4.2e6, 10.0]
+    pts = np.round(rng.uniform(0, 30, (300_000, 3)), 2) + np.array([5e5, 4.2e6, 10.0])
     h = 0.25
     _, one = grid_sample(pts, h, return_index=True)
     _, two = grid_sample(pts, h, return_index=True, n_jobs=2)
