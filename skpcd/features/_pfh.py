@@ -38,6 +38,7 @@ from skpcd.preprocessing._normals import (
     pack_neighborhoods,
 )
 from skpcd.utils import check_point_clouds
+from skpcd.utils._compile import entry_point
 from skpcd.utils._estimator import CloudTransformer
 from skpcd.utils._memory import release_free_memory, unshared_zeros
 from skpcd.utils._parallel import effective_threads, map_batches, parallel_rows
@@ -83,6 +84,7 @@ def _neighborhoods(points, neighborhoods, n_neighbors, radius, n_threads):
     )
 
 
+@entry_point
 def compute_pfh(
     points,
     normals,
@@ -351,6 +353,7 @@ def _fpfh_from_counts(p, counts, table, nb, n_bins, convention, n_threads, out=N
     return out.astype(np.float32, copy=False)
 
 
+@entry_point
 def compute_fpfh(
     points,
     normals,

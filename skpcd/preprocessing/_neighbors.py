@@ -26,6 +26,7 @@ from skpcd.preprocessing._grid import (
     grid_shape,
     sort_points,
 )
+from skpcd.utils._compile import entry_point
 from skpcd.utils._parallel import effective_threads, parallel_rows
 from skpcd.utils._validation import check_extents, cloud_bounds, max_extent
 
@@ -94,6 +95,7 @@ def _check_points(points):
     return xyz
 
 
+@entry_point
 def compute_neighborhoods(
     points, *, n_neighbors=None, radius=None, n_jobs=None, algorithm="auto"
 ):

@@ -12,6 +12,7 @@ from skpcd.preprocessing._neighbors import (
 )
 from skpcd.preprocessing._normals_kernels import normals_rows
 from skpcd.utils import check_point_clouds
+from skpcd.utils._compile import entry_point
 from skpcd.utils._estimator import CloudTransformer
 from skpcd.utils._parallel import effective_threads, parallel_rows
 from skpcd.utils._validation import cloud_bounds, local_frame
@@ -80,6 +81,7 @@ def local_viewpoints(viewpoint, xyz, cloud_ptr, origins):
     return viewpoint - origins
 
 
+@entry_point
 def estimate_normals(
     points,
     *,

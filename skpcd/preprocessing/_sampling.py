@@ -12,6 +12,7 @@ from skpcd.preprocessing._grid import argsort_keys
 from skpcd.preprocessing._neighbors import _check_points
 from skpcd.preprocessing._spacing import point_spacing
 from skpcd.utils import check_point_clouds
+from skpcd.utils._compile import entry_point
 from skpcd.utils._estimator import CloudTransformer
 from skpcd.utils._parallel import effective_threads, parallel_rows
 from skpcd.utils._validation import point_bounds
@@ -89,6 +90,7 @@ def _grid_sample_lexsort(u, h):
     return np.sort(order[first])
 
 
+@entry_point
 def grid_sample(points, voxel_size="auto", *, return_index=False, n_jobs=None):
     """3D grid sampling of one cloud: in every occupied cell, the point
     closest to the cell's centre.

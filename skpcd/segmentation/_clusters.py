@@ -25,6 +25,7 @@ from sklearn.utils.validation import validate_data
 
 from skpcd.preprocessing._grid import ball_counts, radius_grid
 from skpcd.segmentation import _cluster_kernels as k
+from skpcd.utils._compile import entry_point
 from skpcd.utils._parallel import effective_threads, parallel_rows, parallel_section
 from skpcd.utils._validation import refuse_sequence
 
@@ -95,6 +96,7 @@ def _union(grid, core, r2, n_threads):
     return forests[0]
 
 
+@entry_point
 def grid_dbscan(xyz, eps, min_samples, *, n_jobs=None):
     """DBSCAN of one cloud on a voxel grid, in O(n_points) memory.
 
@@ -189,6 +191,7 @@ def filter_cluster_sizes(labels, min_size=1, max_size=None):
     return new[labels]
 
 
+@entry_point
 def euclidean_clusters(
     points,
     *,
@@ -326,6 +329,7 @@ class EuclideanClusters(ClusterMixin, BaseEstimator):
         self.n_jobs = n_jobs
 
     @_fit_context(prefer_skip_nested_validation=True)
+    @entry_point
     def fit(self, X, y=None):
         """Find the clusters of one cloud.
 

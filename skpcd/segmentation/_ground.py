@@ -26,6 +26,7 @@ from sklearn.base import BaseEstimator, _fit_context
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from skpcd.utils._compile import entry_point
 from skpcd.utils._parallel import effective_threads, parallel_rows
 
 __all__ = ["GROUND_PRESETS", "GroundFilter"]
@@ -610,6 +611,7 @@ class GroundFilter(BaseEstimator):
         return objects, dem
 
     @_fit_context(prefer_skip_nested_validation=True)
+    @entry_point
     def fit(self, X, y=None):
         """Build the terrain model of a scene.
 
@@ -786,6 +788,7 @@ class GroundFilter(BaseEstimator):
         """Cells flagged as objects (or empty, or low noise)."""
         return self._dense(2, True)
 
+    @entry_point
     def height(self, X):
         """Height of points above the terrain model.
 
@@ -899,6 +902,7 @@ class GroundFilter(BaseEstimator):
         dem = self._patches[0][3]
         return self._classify(xyz, self._frame(dem), dem, n_threads)
 
+    @entry_point
     def predict(self, X):
         """Which points are ground.
 
@@ -915,6 +919,7 @@ class GroundFilter(BaseEstimator):
         check_is_fitted(self)
         return self._ground(self._xyz(X, reset=False), effective_threads(self.n_jobs))
 
+    @entry_point
     def fit_predict(self, X, y=None):
         """Fit the terrain model of a scene and return its ground points.
 

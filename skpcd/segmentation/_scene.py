@@ -27,6 +27,7 @@ from skpcd.segmentation._clusters import (
 )
 from skpcd.segmentation._dbscan import EPS_SCALE, AutoEpsDBSCAN
 from skpcd.segmentation._ground import GROUND_PRESETS, GroundFilter
+from skpcd.utils._compile import entry_point
 
 __all__ = ["SceneSegmentation", "make_scene", "segment_scene"]
 
@@ -83,6 +84,7 @@ class SceneSegmentation(typing.NamedTuple):
     },
     prefer_skip_nested_validation=True,
 )
+@entry_point
 def segment_scene(
     points,
     *,

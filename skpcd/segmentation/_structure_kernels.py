@@ -174,7 +174,8 @@ def aligned_components(indptr, indices, mask, normal, min_cos, labels):
                 + normal[i, 2] * normal[k, 2]
             )
             if abs(d) >= min_cos:
-                a, b = _find(parent, i), _find(parent, k)
+                # k as int64, like i: one compiled version of _find
+                a, b = _find(parent, i), _find(parent, np.int64(k))
                 if a != b:
                     if a < b:
                         parent[b] = a
