@@ -29,7 +29,11 @@ from skpcd.preprocessing._grid import (
     radius_grid,
     snake_order,
 )
-from skpcd.preprocessing._neighbors import Neighborhoods, compute_neighborhoods
+from skpcd.preprocessing._neighbors import (
+    Neighborhoods,
+    compute_neighborhoods,
+    scattered,
+)
 from skpcd.preprocessing._normals import (
     CLOUD_VIEWPOINT,
     _check_viewpoint,
@@ -341,14 +345,18 @@ def _fpfh_packed(p, n, nb, n_bins, convention, n_threads):
     return _fpfh_from_counts(p, counts, table, nb, n_bins, convention, n_threads)
 
 
-def _fpfh_from_counts(p, counts, table, nb, n_bins, convention, n_threads, out=None):
+def _fpfh_from_counts(
+    p, counts, table, nb, n_bins, convention, n_threads, out=None, rows=None
+):
     """FPFH from the SPFH pair counts of :func:`_spfh_counts`, into ``out``
-    (zeroed, float32) when given, unless the convention sums in float64."""
+    (zeroed, float32) when given, unless the convention sums in float64;
+    point ``i``'s row at ``rows[i]`` when given."""
     mode = FPFH_CONVENTIONS.index(convention)
     if out is None or mode == 2:
         dtype = np.float64 if mode == 2 else np.float32
         out = unshared_zeros((len(p), 3 * n_bins), dtype)
-    args = (p, counts, nb.indptr, nb.indices, table, n_bins, mode, out)
+    rows = np.zeros(0, np.int64) if rows is None else rows
+    args = (p, counts, nb.indptr, nb.indices, table, n_bins, mode, rows, out)
     parallel_rows(fpfh_rows, len(p), n_threads, *args)
     return out.astype(np.float32, copy=False)
 
@@ -433,6 +441,12 @@ class _LocalDescriptor(CloudTransformer):
         "n_jobs": [Integral, None],
     }
     _default_n_neighbors = 10
+    # clouds whose neighbours lie far apart in memory (shuffled) computed in
+    # the search's grid order (`scattered`): FPFH on the DALES objects as one
+    # shuffled cloud 1.43 -> 0.91 s (two threads); clouds in scan order are
+    # left in theirs (renumbering them cost 10 %). PFH's pair stage is bound
+    # by its arithmetic, not by its reads: not renumbered
+    _grid_order = False
 
     def _check_search(self):
         if self.n_neighbors is not None and self.radius is not None:
@@ -494,14 +508,24 @@ class _LocalDescriptor(CloudTransformer):
         k = self.n_neighbors
         if k is None and self.radius is None:
             k = self._default_n_neighbors
-        xyz, offsets, nb = pack_neighborhoods(
+        xyz, offsets, nb, order = pack_neighborhoods(
             clouds, n_neighbors=k, radius=self.radius, n_threads=n_threads,
-            with_sqdist=False,
+            with_sqdist=False, return_order=True,
         )  # fmt: skip
+        if not self._grid_order or not scattered(nb):
+            order = None
+        if order is not None:
+            # the points renumbered in the search's grid order (by cell):
+            # neighbours close in memory, whatever the clouds' own order
+            nb = nb.renumbered(order, n_threads)
         # float32 as PCL, each cloud in its local frame (far from the origin:
         # relative to its minimum), the viewpoint moved into the same frame
         p, origins = local_frame(xyz, offsets)
+        if order is not None:
+            p = p[order]
         given, mask = self._given_normals(clouds)
+        if order is not None and given is not None:
+            given, mask = given[order], mask[order]
         if given is not None and mask.all():
             n = given
         else:
@@ -514,6 +538,8 @@ class _LocalDescriptor(CloudTransformer):
                     n_threads=n_threads,
                     with_sqdist=False,
                 )
+                if order is not None:
+                    nnb = nnb.renumbered(order, n_threads)
             vp = local_viewpoints(
                 _check_viewpoint(self.viewpoint), xyz, offsets, origins
             )
@@ -523,20 +549,24 @@ class _LocalDescriptor(CloudTransformer):
                 n[mask] = given[mask]
         del xyz, given, mask  # the descriptors work in float32
         undefined = ~np.isfinite(n).all(axis=1) | (nb.sizes < 2)
+        if order is not None:
+            undefined[order] = undefined.copy()
         # the search's temporaries are freed: return their pages to the system
         # before the kernels allocate their outputs (lower peak memory)
         release_free_memory()
         pairs = self._pair_stage(p, n, nb, offsets, n_threads, out)
         del n  # no later stage reads the normals: freed before its output
-        out = self._final_stage(p, pairs, nb, n_threads, out)
+        out = self._final_stage(p, pairs, nb, n_threads, out, order)
         return out, undefined, offsets
 
     def _pair_stage(self, p, n, nb, offsets, n_threads, out=None):
         """The kernels that read the normals (the pair features)."""
         raise NotImplementedError
 
-    def _final_stage(self, p, pairs, nb, n_threads, out=None):
-        """The kernels after the normals are freed; by default none."""
+    def _final_stage(self, p, pairs, nb, n_threads, out=None, rows=None):
+        """The kernels after the normals are freed; by default none. Point
+        ``i``'s row of the output is ``rows[i]`` when given (the points in
+        grid order, :attr:`_grid_order`)."""
         return pairs
 
     def undefined_mask(self, X):
@@ -863,6 +893,8 @@ class FPFHTransformer(_LocalDescriptor):
         "convention": [StrOptions(set(FPFH_CONVENTIONS))],
     }
 
+    _grid_order = True
+
     def __init__(
         self,
         n_neighbors=None,
@@ -897,9 +929,9 @@ class FPFHTransformer(_LocalDescriptor):
         """SPFH as pair counts: the only FPFH stage that reads the normals."""
         return _spfh_counts(p, n, nb, int(self.n_bins), n_threads, pack=True)
 
-    def _final_stage(self, p, pairs, nb, n_threads, out=None):
+    def _final_stage(self, p, pairs, nb, n_threads, out=None, rows=None):
         counts, table = pairs
         # the normals are gone: hand their pages back before the output
         release_free_memory()
         args = (p, counts, table, nb, int(self.n_bins), self.convention, n_threads)
-        return _fpfh_from_counts(*args, out)
+        return _fpfh_from_counts(*args, out, rows)

@@ -537,7 +537,7 @@ def _count(counts, j, b, packed):
 
 
 @njit(cache=True, nogil=True)
-def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out):
+def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, rows, out):
     """FPFH of points ``lo`` to ``hi`` into the zeroed rows of ``out``.
 
     ``mode`` 0, PCL: the neighbours' SPFH weighted by 1/squared distance
@@ -546,19 +546,21 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out)
     double, product in float). Mode 1, Open3D: the same plus the point's own
     SPFH. Mode 2, Rusu et al. (2009): SPFH(p) + (1/k) sum SPFH(q) / d in
     float64 (``out`` float64), k counting the neighbours at a non-zero
-    distance, not rescaled.
+    distance, not rescaled. Point ``i``'s row is ``rows[i]`` (empty: ``i``).
     """
     points = borrow(points)
     counts = borrow(counts)
     indptr = borrow(indptr)
     indices = borrow(indices)
     table = borrow(table)
+    rows = borrow(rows)
     out = borrow(out)
     width = 3 * n_bins
     n_table = len(table)
     # 4-bit counts, two per byte (see spfh_rows), or one count per element
     packed = counts.shape[1] < width
     for i in range(lo, hi):
+        o = rows[i] if len(rows) else i
         s1 = s2 = s3 = 0.0
         k = 0
         for t in range(indptr[i], indptr[i + 1]):
@@ -571,7 +573,7 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out)
             if mode == 2:
                 w64 = 1.0 / math.sqrt(np.float64(d))
                 for b in range(width):
-                    out[i, b] += (
+                    out[o, b] += (
                         _spfh_value(table, n_pairs, _count(counts, j, b, packed)) * w64
                     )
                 continue
@@ -590,9 +592,9 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out)
                     s1 += v1
                     s2 += v2
                     s3 += v3
-                    out[i, b] += v1
-                    out[i, b2] += v2
-                    out[i, b3] += v3
+                    out[o, b] += v1
+                    out[o, b2] += v2
+                    out[o, b3] += v3
                 continue
             if n_pairs < n_table:
                 # the three blocks side by side: three independent sums, each
@@ -605,9 +607,9 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out)
                     s1 += v1
                     s2 += v2
                     s3 += v3
-                    out[i, b] += v1
-                    out[i, n_bins + b] += v2
-                    out[i, 2 * n_bins + b] += v3
+                    out[o, b] += v1
+                    out[o, n_bins + b] += v2
+                    out[o, 2 * n_bins + b] += v3
                 continue
             for b in range(n_bins):
                 v1 = _spfh_value(table, n_pairs, _count(counts, j, b, packed)) * weight
@@ -624,26 +626,26 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, out)
                 s1 += v1
                 s2 += v2
                 s3 += v3
-                out[i, b] += v1
-                out[i, n_bins + b] += v2
-                out[i, 2 * n_bins + b] += v3
+                out[o, b] += v1
+                out[o, n_bins + b] += v2
+                out[o, 2 * n_bins + b] += v3
         n_own = indptr[i + 1] - indptr[i] - 1
         if mode == 2:
             for b in range(width):
                 if k > 0:
-                    out[i, b] /= k
-                out[i, b] += _spfh_value(table, n_own, _count(counts, i, b, packed))
+                    out[o, b] /= k
+                out[o, b] += _spfh_value(table, n_own, _count(counts, i, b, packed))
             continue
         k1 = np.float32(100.0 / s1) if s1 != 0.0 else np.float32(s1)
         k2 = np.float32(100.0 / s2) if s2 != 0.0 else np.float32(s2)
         k3 = np.float32(100.0 / s3) if s3 != 0.0 else np.float32(s3)
         for b in range(n_bins):
-            out[i, b] *= k1
-            out[i, n_bins + b] *= k2
-            out[i, 2 * n_bins + b] *= k3
+            out[o, b] *= k1
+            out[o, n_bins + b] *= k2
+            out[o, 2 * n_bins + b] *= k3
         if mode == 1:
             for b in range(width):
-                out[i, b] += _spfh_value(table, n_own, _count(counts, i, b, packed))
+                out[o, b] += _spfh_value(table, n_own, _count(counts, i, b, packed))
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -365,12 +365,15 @@ def knn_cells(lo, hi, cells, grid, indptr, max_shell, todo, indices, sqdist, har
                 ey = blk_y[u] - qy
                 ez = blk_z[u] - qz
                 blk_d[u] = ex * ex + ey * ey + ez * ez
+            # the k-th distance so far, in a register (infinite until k)
+            worst = np.inf
             for u in range(n_cand):
                 d2 = blk_d[u]
-                t = blk_t[u]
                 # most candidates fail this test: the call stays rare
-                if t != t0 and (count < kc or d2 <= bd[kc - 1]):
-                    count = _insert(bd, bi, count, kc, d2, order[t])
+                if d2 <= worst and blk_t[u] != t0:
+                    count = _insert(bd, bi, count, kc, d2, order[blk_t[u]])
+                    if count == kc:
+                        worst = bd[kc - 1]
             starts, stops, n_runs = block_start, block_stop, 0
             while True:
                 for r in range(n_runs):
@@ -716,6 +719,23 @@ def gather_rows(lo, hi, xyz, order, xs):
         xs[t, 0] = xyz[j, 0]
         xs[t, 1] = xyz[j, 1]
         xs[t, 2] = xyz[j, 2]
+
+
+@njit(cache=True, nogil=True)
+def renumber_rows(lo, hi, order, inv, nb, new_indptr, new_indices, new_sqdist):
+    """Rows ``lo`` to ``hi`` of neighbourhoods ``nb`` (indptr, indices,
+    sqdist) renumbered: new row ``t`` is old row ``order[t]``, every index
+    ``j`` in it becomes ``inv[j]``; distances copied when ``new_sqdist``
+    is not empty."""
+    indptr, indices, sqdist = nb
+    for t in range(lo, hi):
+        s = indptr[order[t]]
+        d = new_indptr[t]
+        for r in range(new_indptr[t + 1] - d):
+            new_indices[d + r] = inv[indices[s + r]]
+        if len(new_sqdist):
+            for r in range(new_indptr[t + 1] - d):
+                new_sqdist[d + r] = sqdist[s + r]
 
 
 @njit(cache=True, nogil=True)

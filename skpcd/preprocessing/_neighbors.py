@@ -50,6 +50,12 @@ _COARSER = 3
 # Remaining isolated queries are answered by brute force when they need at
 # most this many distances (the sizes of their clouds, summed).
 _BRUTE_WORK = 20_000_000
+# Neighbours farther apart than this in the points' order are far apart in
+# memory; when more than _FAR_SHARE of them are (a shuffled cloud: 83 % of
+# the DALES objects' k = 10 neighbours, 0 % in their own order), the
+# descriptors renumber the points in grid order (see `scattered`).
+_NEAR = 1 << 15
+_FAR_SHARE = 0.25
 
 
 @dataclass(frozen=True)
@@ -83,6 +89,59 @@ class Neighborhoods:
     def offset(self, start):
         """The same neighbourhoods with every index shifted by ``start``."""
         return Neighborhoods(self.indptr, self.indices + np.int32(start), self.sqdist)
+
+    def renumbered(self, order, n_threads=1):
+        """The same neighbourhoods with the points renumbered.
+
+        Point ``order[t]`` becomes point ``t``: its row is row ``t``, and
+        every index is renumbered alike. The rows keep their order (by
+        distance, ties by the old index).
+
+        Parameters
+        ----------
+        order : ndarray of shape (n_points,), int64
+            A permutation of the points.
+        n_threads : int, default=1
+            Threads for the copy.
+
+        Returns
+        -------
+        neighborhoods : Neighborhoods
+        """
+        order = np.asarray(order, dtype=np.int64)
+        inv = np.empty(len(order), dtype=np.int32)
+        inv[order] = np.arange(len(order), dtype=np.int32)
+        indptr = np.zeros_like(self.indptr)
+        np.cumsum(self.sizes[order], out=indptr[1:])
+        nb = Neighborhoods(
+            indptr,
+            np.empty_like(self.indices),
+            np.empty(len(self.indices) if len(self.sqdist) else 0, np.float32),
+        )
+        args = (order, inv, (self.indptr, self.indices, self.sqdist))
+        args += (indptr, nb.indices, nb.sqdist)
+        parallel_rows(g.renumber_rows, len(order), n_threads, *args)
+        return nb
+
+
+def scattered(nb, n_rows=4096):
+    """Whether the neighbours lie far apart in the points' order.
+
+    True when more than ``_FAR_SHARE`` of the neighbours of ``n_rows`` rows
+    spread evenly over the points are more than ``_NEAR`` points away from
+    theirs: the kernels that read the neighbours' rows would then miss the
+    cache at almost every read (a shuffled cloud), and the points are better
+    renumbered in grid order (:meth:`Neighborhoods.renumbered`) first.
+    """
+    n = nb.n_points
+    if n <= _NEAR:
+        return False
+    rows = np.linspace(0, n - 1, n_rows).astype(np.int64)
+    starts, sizes = nb.indptr[rows], nb.sizes[rows]
+    first = np.cumsum(sizes) - sizes
+    slots = np.arange(sizes.sum()) - np.repeat(first - starts, sizes)
+    gap = np.abs(nb.indices[slots] - np.repeat(rows, sizes))
+    return bool(np.mean(gap > _NEAR) > _FAR_SHARE)
 
 
 def _check_points(points):
@@ -180,6 +239,7 @@ def search_packed(
     n_threads=1,
     algorithm="auto",
     with_sqdist=True,
+    return_order=False,
 ):
     """Neighbourhoods of several clouds packed in one array, never crossing clouds.
 
@@ -196,12 +256,28 @@ def search_packed(
     with_sqdist : bool, default=True
         False leaves ``sqdist`` empty (the grid search), to save memory when
         only the indices are needed.
+    return_order : bool, default=False
+        Also return the order of the points in the search's grid (sorted by
+        cloud, then cell: neighbours close in that order), or None (the
+        k-d tree, no points).
 
     Returns
     -------
     neighborhoods : Neighborhoods
         With indices into ``xyz``.
+    order : ndarray of shape (n_points,), int64, or None
+        Only with ``return_order``.
     """
+    nb, order = _search_packed(
+        xyz, cloud_ptr, n_neighbors, radius, n_threads, algorithm, with_sqdist
+    )
+    return (nb, order) if return_order else nb
+
+
+def _search_packed(
+    xyz, cloud_ptr, n_neighbors, radius, n_threads, algorithm, with_sqdist
+):
+    """:func:`search_packed`, returning ``(neighborhoods, grid order or None)``."""
     _check_search(n_neighbors, radius, algorithm)
     cloud_ptr = np.asarray(cloud_ptr, dtype=np.int64)
     # squared distances overflow beyond ~7.7e153: refused, not searched
@@ -217,13 +293,14 @@ def search_packed(
         counts = np.repeat(np.minimum(sizes, int(n_neighbors)), sizes)
         np.cumsum(counts, out=indptr[1:])
     if len(xyz) == 0:
-        return Neighborhoods(
+        empty = Neighborhoods(
             np.zeros(1, np.int64), np.zeros(0, np.int32), np.zeros(0, np.float32)
         )
+        return empty, None
     if algorithm == "kd_tree":
         if n_neighbors is not None:
-            return _knn_kd_tree(xyz, cloud_ptr, indptr, None, n_threads)
-        return _radius_kd_tree(xyz, cloud_ptr, float(radius), n_threads)
+            return _knn_kd_tree(xyz, cloud_ptr, indptr, None, n_threads), None
+        return _radius_kd_tree(xyz, cloud_ptr, float(radius), n_threads), None
     n = len(xyz)
     if n_neighbors is not None:
         nb = Neighborhoods(
@@ -234,26 +311,27 @@ def search_packed(
         hard = np.zeros(n, dtype=np.bool_)
         todo = np.zeros(0, dtype=np.bool_)
         grid = _knn_grid(xyz, cloud_ptr, int(n_neighbors), lo_hi, n_threads)
+        order = grid.order
         rows = np.arange(grid.n_cells)
         for attempt in range(_COARSER):
             args = (rows, grid, indptr, _MAX_SHELL, todo, nb.indices, nb.sqdist, hard)
             parallel_rows(g.knn_cells, len(rows), n_threads, *args)
             if not hard.any():
-                return nb
+                return nb, order
             todo, hard = hard, np.zeros(n, dtype=np.bool_)
             which = np.flatnonzero(todo)
             cloud = np.searchsorted(cloud_ptr, which, side="right") - 1
             if sizes[cloud].sum() <= _BRUTE_WORK:
                 args = (which, cloud, xyz, cloud_ptr, indptr, nb.indices, nb.sqdist)
                 parallel_rows(g.knn_brute, len(which), n_threads, *args)
-                return nb
+                return nb, order
             if attempt == _COARSER - 1:
                 break
             # isolated points: again on cells four times wider
             grid = build_grid(xyz, cloud_ptr, 4 * grid.h, lo_hi, n_threads)
             rows = g.cells_with(todo, grid)
         _knn_kd_tree(xyz, cloud_ptr, indptr, np.flatnonzero(todo), n_threads, nb)
-        return nb
+        return nb, order
     grid = build_grid(xyz, cloud_ptr, np.full(len(sizes), radius), lo_hi, n_threads)
     counts = ball_counts(grid, radius, n_threads)
     np.cumsum(counts, out=indptr[1:])
@@ -263,7 +341,7 @@ def search_packed(
         np.empty(indptr[-1] if with_sqdist else 0, dtype=np.float32),
     )
     ball_lists(grid, radius, indptr, counts, nb.indices, nb.sqdist, n_threads)
-    return nb
+    return nb, grid.order
 
 
 def _knn_grid(xyz, cloud_ptr, k, lo_hi=None, n_threads=1):

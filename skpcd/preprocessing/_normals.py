@@ -331,7 +331,13 @@ class NormalEstimator(CloudTransformer):
 
 
 def pack_neighborhoods(
-    clouds, *, n_neighbors=None, radius=None, n_threads=1, with_sqdist=True
+    clouds,
+    *,
+    n_neighbors=None,
+    radius=None,
+    n_threads=1,
+    with_sqdist=True,
+    return_order=False,
 ):
     """Stack clouds and their neighbourhoods into one set of packed arrays.
 
@@ -345,6 +351,9 @@ def pack_neighborhoods(
         Threads for the searches.
     with_sqdist : bool, default=True
         False leaves the neighbourhoods' ``sqdist`` empty.
+    return_order : bool, default=False
+        Also return the search's grid order of the points, or None
+        (:func:`~skpcd.preprocessing._neighbors.search_packed`).
 
     Returns
     -------
@@ -354,12 +363,19 @@ def pack_neighborhoods(
         Cloud ``i`` is ``xyz[offsets[i]:offsets[i + 1]]``.
     neighborhoods : Neighborhoods
         CSR neighbourhoods with global indices; neighbours never cross clouds.
+    order : ndarray of shape (n_total,), int64, or None
+        Only with ``return_order``.
     """
     offsets = np.zeros(len(clouds) + 1, dtype=np.int64)
     np.cumsum([len(c) for c in clouds], out=offsets[1:])
     search = {"radius": radius} if radius is not None else {"n_neighbors": n_neighbors}
     xyz = np.ascontiguousarray(np.vstack([c[:, :3] for c in clouds]), dtype=np.float64)
-    nb = search_packed(
-        xyz, offsets, n_threads=n_threads, with_sqdist=with_sqdist, **search
+    found = search_packed(
+        xyz,
+        offsets,
+        n_threads=n_threads,
+        with_sqdist=with_sqdist,
+        return_order=return_order,
+        **search,
     )
-    return xyz, offsets, nb
+    return (xyz, offsets, *found) if return_order else (xyz, offsets, found)

@@ -450,3 +450,29 @@ def test_pooled_parts_give_the_pooled_rows_of_all_points(est, pooling, monkeypat
     monkeypatch.setattr(_pfh, "_POOLED_PART", 10**9)  # one part
     np.testing.assert_array_equal(est.fit_transform(X), expected)
     np.testing.assert_array_equal(est.fit_transform([np.vstack(X)]), whole)
+
+
+@pytest.mark.parametrize("convention", ["pcl", "open3d", "paper"])
+def test_fpfh_of_a_shuffled_cloud_in_grid_order_is_the_same(convention, monkeypatch):
+    # a shuffled cloud is computed renumbered in grid order (its neighbours
+    # far apart in memory): the same bits as in its own order
+    from skpcd.features._pfh import _LocalDescriptor
+    from skpcd.preprocessing._neighbors import _NEAR, scattered, search_packed
+
+    rng = np.random.default_rng(7)
+    n = 4 * _NEAR
+    s = np.sort(rng.random(n)) * 150.0
+    xyz = np.column_stack([s, rng.random(n) * 3.0, np.sin(s) + rng.random(n) * 0.05])
+    X = [xyz[rng.permutation(n)], xyz[:500]]
+    ptr = np.array([0, n, n + 500])
+    nb = search_packed(np.vstack(X), ptr, n_neighbors=10)
+    assert scattered(nb)  # the renumbered path runs
+    est = FPFHTransformer(n_neighbors=10, convention=convention, n_jobs=2)
+    renumbered = est.transform(X)
+    monkeypatch.setattr(FPFHTransformer, "_grid_order", _LocalDescriptor._grid_order)
+    own = est.transform(X)
+    for a, b in zip(renumbered, own):
+        np.testing.assert_array_equal(a, b)
+    pooled = est.set_params(pooling="mean").transform(X)
+    monkeypatch.undo()
+    np.testing.assert_array_equal(est.transform(X), pooled)

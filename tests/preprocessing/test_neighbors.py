@@ -172,3 +172,54 @@ def test_extents_whose_squares_overflow_are_refused():
         compute_neighborhoods(pts, n_neighbors=3)
     # a cloud far out with a representable extent is searched
     compute_neighborhoods(pts * 1e-60 + 1e250, n_neighbors=3)
+
+
+def _scan_like(n, seed=0):
+    """A cloud in scan order: points along a few long strips, each strip
+    swept in order (neighbours close in the points' order)."""
+    rng = np.random.default_rng(seed)
+    s = np.sort(rng.random(n)) * 200.0
+    return np.column_stack([s, rng.random(n) * 2.0, rng.random(n) * 0.1])
+
+
+def test_grid_order_is_a_permutation_within_clouds_and_renumbering_is_exact():
+    from skpcd.preprocessing._neighbors import search_packed
+
+    rng = np.random.default_rng(3)
+    xyz = np.vstack([rng.random((700, 3)), rng.random((300, 3)) + 5.0])
+    ptr = np.array([0, 700, 1000])
+    for search in ({"n_neighbors": 9}, {"radius": 0.15}):
+        nb, order = search_packed(xyz, ptr, return_order=True, **search)
+        assert sorted(order.tolist()) == list(range(1000))
+        assert (order[:700] < 700).all() and (order[700:] >= 700).all()
+        new = nb.renumbered(order, n_threads=2)
+        inv = np.argsort(order)
+        for t in range(1000):
+            i = order[t]
+            old_row = nb.indices[nb.indptr[i] : nb.indptr[i + 1]]
+            new_row = new.indices[new.indptr[t] : new.indptr[t + 1]]
+            # the same neighbours, renumbered, in the same order
+            assert new_row.tolist() == inv[old_row].tolist()
+            old_d = nb.sqdist[nb.indptr[i] : nb.indptr[i + 1]]
+            assert new.sqdist[new.indptr[t] : new.indptr[t + 1]].tolist() == (
+                old_d.tolist()
+            )
+    _, order = search_packed(xyz, ptr, n_neighbors=9, algorithm="kd_tree",
+                             return_order=True)  # fmt: skip
+    assert order is None
+
+
+def test_scattered_tells_a_shuffled_cloud_from_one_in_scan_order():
+    from skpcd.preprocessing._neighbors import _NEAR, scattered, search_packed
+
+    n = 3 * _NEAR
+    xyz = _scan_like(n)
+    one = np.array([0, n])
+    assert not scattered(search_packed(xyz, one, n_neighbors=10))
+    shuffled = xyz[np.random.default_rng(1).permutation(n)]
+    assert scattered(search_packed(shuffled, one, n_neighbors=10))
+    # small clouds fit in the cache whatever their order
+    small = shuffled[: _NEAR // 2]
+    assert not scattered(
+        search_packed(small, np.array([0, len(small)]), n_neighbors=10)
+    )
