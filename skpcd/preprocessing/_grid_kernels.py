@@ -335,9 +335,20 @@ def knn_cells(lo, hi, cells, grid, indptr, max_shell, todo, indices, sqdist, har
             t_own = np.empty(cap, dtype=np.int64)
             blk_x, blk_y = borrow(g_own[0]), borrow(g_own[1])
             blk_z, blk_d, blk_t = borrow(g_own[2]), borrow(g_own[3]), borrow(t_own)
+        # the cell's own points first, then the rest of the block (its own
+        # column first): the nearest come early, fewer insertions follow
         n_cand = 0
+        own_lo, own_hi = cell_start[cell], cell_start[cell + 1]
+        for t in range(own_lo, own_hi):
+            blk_x[n_cand] = xs[t, 0]
+            blk_y[n_cand] = xs[t, 1]
+            blk_z[n_cand] = xs[t, 2]
+            blk_t[n_cand] = t
+            n_cand += 1
         for r in range(n_block):
             for t in range(block_start[r], block_stop[r]):
+                if t >= own_lo and t < own_hi:
+                    continue
                 blk_x[n_cand] = xs[t, 0]
                 blk_y[n_cand] = xs[t, 1]
                 blk_z[n_cand] = xs[t, 2]
