@@ -476,3 +476,12 @@ def test_fpfh_of_a_shuffled_cloud_in_grid_order_is_the_same(convention, monkeypa
     pooled = est.set_params(pooling="mean").transform(X)
     monkeypatch.undo()
     np.testing.assert_array_equal(est.transform(X), pooled)
+    # normals given with one cloud (columns 3-5), estimated for the other
+    normals, _ = estimate_normals(X[0], n_neighbors=12)
+    X6 = [np.hstack([X[0], normals]), X[1]]
+    est.set_params(pooling=None)
+    renumbered = est.transform(X6)
+    monkeypatch.setattr(FPFHTransformer, "_grid_order", False)
+    for a, b in zip(renumbered, est.transform(X6)):
+        np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(renumbered[0], own[0], equal_nan=True)
