@@ -443,7 +443,7 @@ class _LocalDescriptor(CloudTransformer):
     _default_n_neighbors = 10
     # clouds whose neighbours lie far apart in memory (shuffled) computed in
     # the search's grid order (`scattered`): FPFH on the DALES objects as one
-    # shuffled cloud 1.43 -> 0.91 s (two threads); clouds in scan order are
+    # shuffled cloud 1.54 -> 0.96 s (two threads); clouds in scan order are
     # left in theirs (renumbering them cost 10 %). PFH's pair stage is bound
     # by its arithmetic, not by its reads: not renumbered
     _grid_order = False
