@@ -246,7 +246,8 @@ def write(results, out):
     lines = [
         "skpcd ground removal benchmark (benchmarks/bench_ground.py), "
         + results["date"],
-        "shared 2-core VM, other jobs running: times are noisy",
+        f"load average at the end {os.getloadavg()[0]:.1f} (2 cores): "
+        "times are noisy when it exceeds 2",
         "",
         "ground recall and object loss (share of the class's points flagged "
         "ground), summed over the scenes",

@@ -42,7 +42,7 @@ address-space cap, 20 minute timeout; a failure is reported).
     python benchmarks/bench_street_segmentation.py --no-timing
 
 Results: ``benchmarks/results/street_segmentation.{json,txt}``. Shared 2-core
-VM with other jobs running: times are noisy.
+VM: times are noisy.
 """
 
 import argparse
@@ -309,7 +309,8 @@ def write(results, out):
     lines = [
         "skpcd street segmentation benchmark "
         "(benchmarks/bench_street_segmentation.py), " + results["date"],
-        "shared 2-core VM, other jobs running: times are noisy",
+        f"load average at the end {os.getloadavg()[0]:.1f} (2 cores): "
+        "times are noisy when it exceeds 2",
         "scores over the object points > 0.5 m above the true ground; whole: "
         "objects in one segment (90 %/90 %); facade/wire: recall / precision "
         "of the segment types",
