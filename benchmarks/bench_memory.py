@@ -66,15 +66,13 @@ def _patch(variant):
         kept = []
         pair_stage = pfh.FPFHTransformer._pair_stage
 
-        def keeping(self, p, n, nb, offsets, n_threads):
+        def keeping(self, p, n, *args):
             kept.append(n)
-            return pair_stage(self, p, n, nb, offsets, n_threads)
+            return pair_stage(self, p, n, *args)
 
-        def final(
-            self, p, pairs, nb, n_threads, _final=pfh.FPFHTransformer._final_stage
-        ):
+        def final(self, *args, _final=pfh.FPFHTransformer._final_stage):
             try:
-                return _final(self, p, pairs, nb, n_threads)
+                return _final(self, *args)
             finally:
                 kept.clear()
 

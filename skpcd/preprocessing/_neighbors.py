@@ -99,18 +99,41 @@ class Neighborhoods:
 
         Parameters
         ----------
-        order : ndarray of shape (n_points,), int64
-            A permutation of the points.
+        order : ndarray of shape (n_points,), int
+            A permutation of the points: ``order[t]`` is the point that
+            becomes point ``t``.
         n_threads : int, default=1
             Threads for the copy.
 
         Returns
         -------
         neighborhoods : Neighborhoods
+            Row ``t`` holds the neighbours of point ``order[t]``, each given by
+            its new number.
+
+        Raises
+        ------
+        ValueError
+            If ``order`` is not a permutation of the points.
         """
-        order = np.asarray(order, dtype=np.int64)
-        inv = np.empty(len(order), dtype=np.int32)
-        inv[order] = np.arange(len(order), dtype=np.int32)
+        order = np.asarray(order)
+        n = self.n_points
+        if (
+            order.shape != (n,)
+            or not np.issubdtype(order.dtype, np.integer)
+            or (n and (order.min() < 0 or order.max() >= n))
+        ):
+            raise ValueError(
+                f"order must be a permutation of the {n} points, got an array "
+                f"of shape {order.shape} and dtype {order.dtype}"
+            )
+        order = order.astype(np.int64, copy=False)
+        inv = np.full(n, -1, dtype=np.int32)
+        inv[order] = np.arange(n, dtype=np.int32)
+        if n and inv.min() < 0:
+            raise ValueError(
+                f"order must be a permutation of the {n} points: it repeats some"
+            )
         indptr = np.zeros_like(self.indptr)
         np.cumsum(self.sizes[order], out=indptr[1:])
         nb = Neighborhoods(
@@ -127,11 +150,23 @@ class Neighborhoods:
 def scattered(nb, n_rows=4096):
     """Whether the neighbours lie far apart in the points' order.
 
-    True when more than ``_FAR_SHARE`` of the neighbours of ``n_rows`` rows
-    spread evenly over the points are more than ``_NEAR`` points away from
-    theirs: the kernels that read the neighbours' rows would then miss the
-    cache at almost every read (a shuffled cloud), and the points are better
+    The kernels that read the neighbours' rows miss the cache at almost
+    every read when they do (a shuffled cloud): the points are then better
     renumbered in grid order (:meth:`Neighborhoods.renumbered`) first.
+
+    Parameters
+    ----------
+    nb : Neighborhoods
+        The neighbourhoods, in the points' own numbering.
+    n_rows : int, default=4096
+        Rows looked at, spread evenly over the points.
+
+    Returns
+    -------
+    far : bool
+        True when more than a quarter (``_FAR_SHARE``) of the neighbours in
+        those rows are more than 32,768 points (``_NEAR``) away from their
+        point in the numbering; False for 32,768 points or fewer.
     """
     n = nb.n_points
     if n <= _NEAR:
@@ -258,8 +293,10 @@ def search_packed(
         only the indices are needed.
     return_order : bool, default=False
         Also return the order of the points in the search's grid (sorted by
-        cloud, then cell: neighbours close in that order), or None (the
-        k-d tree, no points).
+        cloud, then cell: neighbours close in that order): ``order[t]`` is
+        the index in ``xyz`` of the ``t``-th point in that order, a
+        permutation within each cloud; None for the k-d tree and for no
+        points.
 
     Returns
     -------

@@ -352,7 +352,8 @@ def pack_neighborhoods(
     with_sqdist : bool, default=True
         False leaves the neighbourhoods' ``sqdist`` empty.
     return_order : bool, default=False
-        Also return the search's grid order of the points, or None
+        Also return the search's grid order of the points: ``order[t]`` is
+        the index in ``xyz`` of the ``t``-th point in that order, or None
         (:func:`~skpcd.preprocessing._neighbors.search_packed`).
 
     Returns

@@ -485,3 +485,48 @@ def test_fpfh_of_a_shuffled_cloud_in_grid_order_is_the_same(convention, monkeypa
     for a, b in zip(renumbered, est.transform(X6)):
         np.testing.assert_array_equal(a, b)
     assert not np.array_equal(renumbered[0], own[0], equal_nan=True)
+
+
+def test_fpfh_renumbered_keeps_undefined_points_radius_and_normal_search(monkeypatch):
+    # the renumbered path with undefined points (a collinear group: no normal),
+    # every undefined policy, undefined_mask, a radius search and a separate
+    # normal search: the same rows as without renumbering
+    from skpcd.preprocessing._neighbors import _NEAR
+
+    rng = np.random.default_rng(11)
+    n = 4 * _NEAR
+    s = np.sort(rng.random(n)) * 150.0
+    strip = np.column_stack([s, rng.random(n) * 3.0, np.cos(s) + rng.random(n) * 0.05])
+    line = np.column_stack(
+        [np.linspace(0.0, 2.0, 40) + 400.0, np.zeros(40), np.zeros(40)]
+    )
+    X = [np.vstack([strip, line])[rng.permutation(n + 40)]]
+    cases = [
+        {"n_neighbors": 10, "undefined": "nan"},
+        {"n_neighbors": 10, "undefined": "drop"},
+        {"n_neighbors": 10, "undefined": "zero", "normal_n_neighbors": 15},
+        {"radius": 0.2, "undefined": "nan"},
+    ]
+    for params in cases:
+        est = FPFHTransformer(n_jobs=2, **params)
+        renumbered, mask = est.transform(X), est.undefined_mask(X)
+        monkeypatch.setattr(FPFHTransformer, "_grid_order", False)
+        own, own_mask = est.transform(X), est.undefined_mask(X)
+        monkeypatch.undo()
+        np.testing.assert_array_equal(mask[0], own_mask[0])
+        assert 40 <= mask[0].sum() < 200  # the line's points, undefined
+        np.testing.assert_array_equal(renumbered[0], own[0])
+
+
+def test_renumbered_refuses_what_is_not_a_permutation():
+    nb = compute_neighborhoods(np.random.default_rng(0).random((50, 3)), n_neighbors=4)
+    with pytest.raises(ValueError, match="permutation of the 50 points"):
+        nb.renumbered(np.arange(49))
+    with pytest.raises(ValueError, match="permutation"):
+        nb.renumbered(np.r_[np.arange(49), 50])
+    with pytest.raises(ValueError, match="repeats"):
+        nb.renumbered(np.r_[np.arange(49), 0])
+    with pytest.raises(ValueError, match="permutation"):
+        nb.renumbered(np.arange(50.0))
+    same = nb.renumbered(np.arange(50))
+    np.testing.assert_array_equal(same.indices, nb.indices)
