@@ -19,7 +19,6 @@ import argparse
 import datetime
 import json
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -29,6 +28,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent
 sys.path.insert(0, str(ROOT))
 
+from bench_simulation import _commit  # noqa: E402
 from bench_threads import _dales  # noqa: E402
 
 K = 10
@@ -91,19 +91,6 @@ def run(repeat, threads):
     )
     print(f"renumbered rows equal the plain ones bit for bit: {same}", flush=True)
     return rows, same
-
-
-def _commit():
-    try:
-        out = subprocess.run(
-            ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
-            capture_output=True,
-            text=True,
-            check=True,
-        )
-        return out.stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
 
 
 def main(argv=None):
