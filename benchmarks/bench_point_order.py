@@ -8,7 +8,9 @@ renumbers a shuffled cloud in grid order (``scattered`` decides); the rows
 the shuffled cloud and on for the recorded one, to show what it gains and
 what it would cost. Every row is the best of ``--repeat`` runs after a
 warm-up, two threads, all in one process (the same warm caches for all).
-The outputs of the renumbered and the plain runs are compared bit for bit.
+The outputs of the renumbered and the plain runs are compared bit for bit,
+and FPFH's peak memory (VmHWM above a process warmed up on 2,000 points) is
+measured on both clouds, each in a fresh process, against input and output.
 
 Usage::
 
@@ -19,6 +21,7 @@ import argparse
 import datetime
 import json
 import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -28,6 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent
 sys.path.insert(0, str(ROOT))
 
+from bench_descriptors import _maxrss_mb, _reset_peak  # noqa: E402
 from bench_simulation import _commit  # noqa: E402
 from bench_threads import _dales  # noqa: E402
 
@@ -48,6 +52,39 @@ def _same(a, b):
     return all(np.array_equal(x, y, equal_nan=True) for x, y in zip(a, b))
 
 
+def _clouds():
+    cloud = np.vstack(_dales())
+    return cloud, cloud[np.random.default_rng(0).permutation(len(cloud))]
+
+
+def peak_worker(variant, threads):
+    """FPFH's peak memory (VmHWM above the process warmed up on 2,000
+    points) on one cloud, in this fresh process; prints a JSON row."""
+    from skpcd.features import FPFHTransformer
+
+    cloud = _clouds()[variant == "shuffled"]
+    est = FPFHTransformer(n_neighbors=K, n_jobs=threads)
+    est.fit_transform([cloud[:2000]])
+    base = _reset_peak()
+    out = est.fit_transform([cloud])
+    peak = _maxrss_mb() - base
+    io = (cloud.nbytes + out[0].nbytes) / 2**20
+    print(json.dumps({"variant": variant, "peak_mb": peak, "io_mb": io}))
+
+
+def peaks(threads):
+    """:func:`peak_worker` for both clouds, each in a fresh process."""
+    rows = []
+    for variant in ("recorded order", "shuffled"):
+        cmd = [sys.executable, __file__, "--peak", variant]
+        cmd += ["--threads", str(threads)]
+        res = subprocess.run(cmd, capture_output=True, text=True, check=True)
+        row = json.loads(res.stdout.strip().splitlines()[-1])
+        print(f"FPFH peak, {variant}: {row['peak_mb']:.1f} MB", flush=True)
+        rows.append(row)
+    return rows
+
+
 def run(repeat, threads):
     import skpcd.features._pfh as pfh_module
     from skpcd.features import (
@@ -57,8 +94,7 @@ def run(repeat, threads):
     )
     from skpcd.preprocessing import NormalEstimator
 
-    cloud = np.vstack(_dales())
-    shuffled = cloud[np.random.default_rng(0).permutation(len(cloud))]
+    cloud, shuffled = _clouds()
     rows = []
 
     def time_it(name, variant, X, est):
@@ -98,8 +134,13 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--out", help="JSON results (and .txt beside)")
+    ap.add_argument("--peak", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
+    if a.peak:
+        peak_worker(a.peak, a.threads)
+        return
     load0 = os.getloadavg()
+    memory = peaks(a.threads)
     rows, same = run(a.repeat, a.threads)
     R = {
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(
@@ -112,6 +153,7 @@ def main(argv=None):
         "repeat": a.repeat,
         "rows": rows,
         "renumbered_equal": same,
+        "peak": memory,
     }
     by = {(r["estimator"], r["variant"]): r["seconds"] for r in rows}
     lines = [
@@ -139,6 +181,12 @@ def main(argv=None):
         f"{by[('FPFHTransformer', 'recorded, renumbering forced')]:.3f} s",
         f"renumbered rows equal the plain ones bit for bit: {same}",
     ]
+    for r in memory:
+        lines.append(
+            f"FPFH peak, {r['variant']} (fresh process): {r['peak_mb']:.1f} MB "
+            f"above the warmed-up process, {r['peak_mb'] / r['io_mb']:.2f}x input "
+            f"+ output ({r['io_mb']:.1f} MB)"
+        )
     text = "\n".join(lines) + "\n"
     print(text)
     if a.out:

@@ -443,10 +443,11 @@ class _LocalDescriptor(CloudTransformer):
     _default_n_neighbors = 10
     # clouds whose neighbours lie far apart in memory (shuffled) computed in
     # the search's grid order (`scattered`): FPFH on the DALES objects as one
-    # shuffled cloud 1.81 -> 1.19 s (two threads; 0.67 s in recorded order,
-    # benchmarks/bench_point_order.py); clouds in recorded order are left in
-    # theirs (renumbered anyway: 0.87 s). PFH's pair stage is bound by its
-    # arithmetic, not by its reads (36 % slower shuffled): not renumbered
+    # shuffled cloud 1.38-1.52x faster (benchmarks/bench_point_order.py);
+    # clouds in recorded order are left in theirs (renumbering them anyway was
+    # slower in three runs of four). PFH's pair stage is bound by its
+    # arithmetic, not by its reads (1.2-1.4x slower shuffled): not renumbered.
+    # Only a stage that writes its rows through `rows` may set this
     _grid_order = False
 
     def _check_search(self):
