@@ -406,7 +406,7 @@ def test_bad_parameters():
         make_street_scene(10.0, scanner="lidar")
     with pytest.raises(ValueError):
         make_street_objects(1, classes=["pole", "unicorn"])
-    assert set(SCAN_PATTERNS) == {"mobile", "aerial", "ugv"}
+    assert set(SCAN_PATTERNS) == {"mobile", "aerial", "ugv", "spinning"}
 
 
 # ---------------------------------------------------------------------------
@@ -425,6 +425,7 @@ _HEIGHTS = {
     "bush": (0.3, 2.4),
     "other": (0.3, 4.3),
     "fence": (0.6, 2.6),
+    "person": (0.9, 2.0),
 }
 
 
@@ -477,3 +478,46 @@ def test_a_class_the_scanner_cannot_see_is_a_clear_error():
             segment_length=20.0,
             random_state=0,
         )
+
+
+@pytest.mark.parametrize("sensor", ["vlp16", "hdl64", "os128"])
+def test_spinning_sensor_rings(sensor):
+    """A spinning sensor's returns lie on its beams' cones: their elevation
+    angles seen from the sensor are the sensor's, to the ray jitter."""
+    from skpcd.datasets._street._scanners import SPINNING_SENSORS
+
+    scene = make_street_scene(
+        30.0,
+        scanner="spinning",
+        scanner_params={"sensor": sensor, "azimuth_step": 2.0, "beam_divergence": 0.0},
+        random_state=2,
+    )
+    origin = scene.trajectory[0]
+    d = scene.points - origin
+    elevation = np.degrees(np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1])))
+    beams = np.asarray(SPINNING_SENSORS[sensor]["elevations"])
+    gap = np.abs(elevation[:, None] - beams[None, :]).min(axis=1)
+    assert np.median(gap) < 0.05
+    assert len(np.unique(np.abs(elevation[:, None] - beams).argmin(axis=1))) > 5
+
+
+def test_randomised_objects_vary_the_scanner():
+    """randomise=True draws the sensor per street: the spacing of the
+    objects of one class spreads more than with one fixed sensor, and the
+    lowest points are cut."""
+    from skpcd.preprocessing import point_spacing
+
+    kw = {"classes": ["car"], "scanner": "spinning", "min_points": 20, "n_jobs": 2}
+    fixed, _ = make_street_objects(12, random_state=0, **kw)
+    mixed, _ = make_street_objects(12, randomise=True, random_state=0, **kw)
+    spread = [np.ptp(np.log([point_spacing(c) for c in s])) for s in (fixed, mixed)]
+    assert spread[1] > spread[0]
+
+
+def test_person_stands_on_the_pavement():
+    clouds, labels = make_street_objects(
+        3, classes=["person"], scanner="spinning", min_points=20, random_state=4
+    )
+    for cloud in clouds:
+        assert 0.9 <= np.ptp(cloud[:, 2]) <= 2.0
+        assert np.ptp(cloud[:, 0]) < 1.6 and np.ptp(cloud[:, 1]) < 1.6

@@ -31,6 +31,7 @@ OBJECT_CLASSES = (
     "bush",
     "other",
     "fence",
+    "person",
 )
 
 
@@ -506,7 +507,8 @@ def bush(rng):
 
 
 def other(rng):
-    """Street clutter: bin, bench, bollards, cabinet, column, rack, planter."""
+    """Street clutter: bin, bench, bollards, cabinet, column, rack, planter,
+    meter, and road works: cones, barriers, drums."""
     kind = _pick(
         rng,
         (
@@ -518,8 +520,11 @@ def other(rng):
             "bike_rack",
             "planter",
             "meter",
+            "cone",
+            "barrier",
+            "drum",
         ),
-        p=(0.2, 0.15, 0.17, 0.14, 0.06, 0.1, 0.1, 0.08),
+        p=(0.14, 0.1, 0.12, 0.1, 0.04, 0.07, 0.07, 0.06, 0.12, 0.12, 0.06),
     )
     parts = Parts()
     if kind == "bin":
@@ -563,10 +568,30 @@ def other(rng):
         parts.box((0, 0, h / 2), (w / 2, w / 2, h / 2))
         parts.ellipsoid((0, 0, h + 0.25), (w * 0.45, w * 0.45, 0.35), hit=0.7)
         h += 0.6
-    else:  # parking meter or ticket machine
+    elif kind == "meter":  # parking meter or ticket machine
         h = _u(rng, 1.2, 1.7)
         parts.cylinder((0, 0, 0), (0, 0, h - 0.4), 0.05)
         parts.box((0, 0, h - 0.2), (0.15, 0.2, 0.2))
+    elif kind == "cone":  # traffic cone or delineator post on a square base
+        h, r = _u(rng, 0.45, 1.1), _u(rng, 0.12, 0.2)
+        base = r + _u(rng, 0.03, 0.08)
+        parts.box((0, 0, 0.02), (base, base, 0.02))
+        parts.cylinder((0, 0, 0.04), (0, 0, h), r, _u(rng, 0.02, 0.05))
+    elif kind == "barrier":
+        length = _u(rng, 1.0, 2.5)
+        if rng.random() < 0.5:  # a concrete or plastic road barrier
+            h, w = _u(rng, 0.6, 1.0), _u(rng, 0.4, 0.7)
+            parts.box((0, 0, h * 0.3), (w / 2, length / 2, h * 0.3))
+            parts.box((0, 0, h * 0.8), (w / 4, length / 2, h * 0.2))
+        else:  # a construction barrier: a board on two A-frame legs
+            h = _u(rng, 0.9, 1.3)
+            parts.box((0, 0, h - 0.15), (0.02, length / 2, 0.15))
+            for y in (-length / 2 + 0.1, length / 2 - 0.1):
+                for dx in (-0.25, 0.25):
+                    parts.cylinder((dx, y, 0), (0, y, h), 0.025)
+    else:  # a traffic drum or barrel
+        h, r = _u(rng, 0.9, 1.1), _u(rng, 0.25, 0.32)
+        parts.cylinder((0, 0, 0), (0, 0, h), r, r * 0.9)
     return parts, {"kind": kind, "height": h}
 
 
@@ -587,6 +612,45 @@ def fence(rng):
     return parts, {"kind": kind, "length": length, "height": h + 0.05}
 
 
+def person(rng):
+    """A pedestrian standing or walking: legs, torso, arms, head; some
+    children, some with a bag or a pushchair (``+x`` the way they face)."""
+    h = _u(rng, 1.55, 1.95) if rng.random() < 0.85 else _u(rng, 1.0, 1.5)
+    s = h / 1.75  # body proportions scale with the height
+    hip, shoulder = 0.53 * h, 0.82 * h
+    half_w = _u(rng, 0.17, 0.23) * s  # half the shoulder width
+    depth = _u(rng, 0.1, 0.16) * s  # half the torso's depth
+    stride = _u(rng, 0.0, 0.35) * s  # 0: standing, feet together
+    parts = Parts()
+    for side, ahead in ((-1.0, 1.0), (1.0, -1.0)):
+        y = side * 0.09 * s
+        parts.cylinder((ahead * stride / 2, y, 0.05), (0.0, y, hip), 0.06 * s, 0.08 * s)
+        swing = -ahead * stride * 0.6
+        parts.cylinder(
+            (0.0, side * (half_w + 0.03), shoulder),
+            (swing, side * (half_w + 0.06), hip - 0.05 * h),
+            0.045 * s,
+        )
+    # torso and coat: an ellipsoid from the hips to the shoulders
+    parts.ellipsoid(
+        (0.0, 0.0, (hip + shoulder) / 2 + 0.02 * h),
+        (depth, half_w, (shoulder - hip) / 2 + 0.06 * h),
+    )
+    parts.ellipsoid((0.0, 0.0, h - 0.11 * s), (0.09 * s, 0.08 * s, 0.115 * s))
+    extra = _pick(
+        rng, ("none", "bag", "backpack", "pushchair"), p=(0.6, 0.15, 0.15, 0.1)
+    )
+    if extra == "bag":
+        side = _pick(rng, (-1.0, 1.0))
+        parts.box((0.0, side * (half_w + 0.1), hip - 0.05), (0.15, 0.05, 0.15))
+    elif extra == "backpack":
+        parts.box((-depth - 0.08, 0.0, shoulder - 0.22), (0.09, 0.15, 0.2))
+    elif extra == "pushchair":
+        parts.box((0.75, 0.0, 0.55), (0.3, 0.25, 0.25))
+        parts.cylinder((0.45, -0.22, 0.9), (0.45, 0.22, 0.9), 0.02)
+    return parts, {"height": h, "stride": stride, "extra": extra}
+
+
 BUILDERS = {
     "pole": pole,
     "lamp_post": lamp_post,
@@ -599,6 +663,7 @@ BUILDERS = {
     "bush": bush,
     "other": other,
     "fence": fence,
+    "person": person,
 }
 
 

@@ -55,6 +55,7 @@ _STRIPS = {
     "bush": ("inner", "garden", "garden", "kerb"),
     "other": ("inner", "inner", "kerb", "garden"),
     "fence": ("edge",),
+    "person": ("kerb", "inner", "inner"),
 }
 
 
@@ -227,6 +228,10 @@ class _Plan:
         if cls == "car":
             along = (lo[0], hi[0])
             yaw = 0.0 if rng.random() < 0.5 else np.pi
+        elif cls == "person":  # facing any way
+            reach = float(np.abs(np.r_[lo[:2], hi[:2]]).max())
+            along = (-reach, reach)
+            yaw = _u(rng, -np.pi, np.pi)
         else:
             along = (lo[1], hi[1])
             yaw = -np.pi / 2 if side == 1 else np.pi / 2
@@ -251,7 +256,9 @@ class _Plan:
             if self.strips[key].free(xx - half, xx + half):
                 self.strips[key].take(xx - half, xx + half)
                 lean = (
-                    rng.normal(0, 0.008, 2) if cls not in ("car", "fence") else (0, 0)
+                    rng.normal(0, 0.008, 2)
+                    if cls not in ("car", "fence", "person")
+                    else (0, 0)
                 )
                 rot = rot_z(yaw) @ rot_x(lean[0]) @ rot_y(lean[1])
                 z = float(self.street.ground_height(xx, y))

@@ -1,4 +1,4 @@
-"""Scan patterns: mobile profilers, an airborne swath, a spinning UGV sensor.
+"""Scan patterns: mobile profilers, an airborne swath, spinning multi-beam sensors.
 
 ``SCAN_PATTERNS`` holds the default numbers of each pattern;
 :func:`plan_scan` turns a pattern, its overrides and a street into the
@@ -26,10 +26,66 @@ from skpcd.datasets._street._raycast import (
     simulate,
 )
 
-__all__ = ["SCAN_PATTERNS", "build_grid", "first_hits", "plan_scan", "scan"]
+__all__ = [
+    "SCAN_PATTERNS",
+    "SPINNING_SENSORS",
+    "build_grid",
+    "first_hits",
+    "plan_scan",
+    "randomise_pattern",
+    "scan",
+]
 
 # HDL-32E vertical angles: 32 beams from -30.67 to +10.67 degrees, 1.33 apart
 _HDL32_ELEVATIONS = tuple(np.round(np.linspace(-30.67, 10.67, 32), 4).tolist())
+
+
+def _hdl64():
+    """HDL-64E (KITTI): 32 beams 1/3 deg apart from +2 to -8.33 deg, 32 beams
+    1/2 deg apart from -8.83 to -24.33 deg."""
+    upper, lower = np.linspace(2.0, -8.33, 32), np.linspace(-8.83, -24.33, 32)
+    return tuple(np.round(np.r_[upper, lower], 4).tolist())
+
+
+def _pandar64():
+    """Pandar64: 1 deg steps from -25 to -6 and from +2 to +15 (coarser
+    at the ends), 1/6 deg in the band from -6 to +2 where the road is."""
+    fine = np.linspace(-6.0, 2.0, 49)
+    below = np.r_[-25.0, -19.0, -14.0, np.arange(-13.0, -6.0, 1.0)]
+    above = np.r_[3.0, 4.0, 5.0, 11.0, 15.0]
+    return tuple(np.round(np.sort(np.r_[below, fine, above])[::-1], 4).tolist())
+
+
+#: Spinning multi-beam sensors of the ``"spinning"`` pattern: vertical angles
+#: (degrees, one per beam), azimuth step at 10 Hz (degrees), range noise (m).
+SPINNING_SENSORS = {
+    "vlp16": {
+        "elevations": tuple(np.linspace(15.0, -15.0, 16).tolist()),
+        "azimuth_step": 0.2,
+        "range_noise": 0.03,
+    },
+    "hdl32": {
+        "elevations": _HDL32_ELEVATIONS[::-1],
+        "azimuth_step": 0.16,
+        "range_noise": 0.02,
+    },
+    "hdl64": {
+        "elevations": _hdl64(),
+        "azimuth_step": 0.18,
+        "range_noise": 0.02,
+    },
+    "pandar64": {
+        "elevations": _pandar64(),
+        "azimuth_step": 0.2,
+        "range_noise": 0.02,
+    },
+    # OS1-128-like: 128 beams evenly over 45 deg, 1024 columns
+    "os128": {
+        "elevations": tuple(np.round(np.linspace(22.5, -22.5, 128), 4).tolist()),
+        "azimuth_step": 360.0 / 1024,
+        "range_noise": 0.03,
+    },
+}
 
 SCAN_PATTERNS = {
     # Optech Lynx-like mobile mapping: two profilers on the vehicle roof whose
@@ -95,6 +151,26 @@ SCAN_PATTERNS = {
         "max_returns": 1,
         "return_separation": 1.0,
     },
+    # One sweep of a spinning multi-beam sensor on a car's roof, as in
+    # autonomous-driving data (KITTI, PandaSet): the beams of ``sensor`` (a
+    # key of SPINNING_SENSORS) unless ``elevations`` / ``azimuth_step`` are
+    # given; ``position`` None puts the car in the middle of the street, in
+    # the right lane.
+    "spinning": {
+        "sensor": "hdl64",
+        "height": 1.73,
+        "position": None,
+        "elevations": None,
+        "azimuth_step": None,
+        "rotation_rate": 10.0,
+        "min_range": 2.0,
+        "max_range": 120.0,
+        "range_noise": None,
+        "beam_divergence": 1.5e-3,
+        "footprint": 0.0,
+        "max_returns": 1,
+        "return_separation": 1.0,
+    },
 }
 
 
@@ -141,6 +217,15 @@ def resolve_pattern(scanner, scanner_params=None, **overrides):
                 f"known: {sorted(conf)}"
             )
         conf[key] = value
+    if "sensor" in conf:
+        if conf["sensor"] not in SPINNING_SENSORS:
+            raise ValueError(
+                f"sensor must be one of {sorted(SPINNING_SENSORS)}, "
+                f"got {conf['sensor']!r}"
+            )
+        for key, value in SPINNING_SENSORS[conf["sensor"]].items():
+            if conf[key] is None:
+                conf[key] = value
     if not 1 <= int(conf["max_returns"]) <= 8:
         raise ValueError(f"max_returns must be 1 to 8, got {conf['max_returns']}")
     for key in (
@@ -156,6 +241,81 @@ def resolve_pattern(scanner, scanner_params=None, **overrides):
     if not float(conf["max_range"]) > float(conf["min_range"]):
         raise ValueError("max_range must be larger than min_range")
     return conf
+
+
+def randomise_pattern(scanner, street, rng, fixed=None):
+    """The numbers of ``scanner`` drawn at random for one street.
+
+    Domain randomisation: what a user's scanner and survey are cannot be
+    known, so each simulated street draws them from the ranges of the
+    sensors in use, and a model trained on the mix does not learn one
+    setting. ``fixed`` (the ``scanner_params`` of the caller) are kept.
+
+    - ``"spinning"``: a sensor of :data:`SPINNING_SENSORS` (16 to 128
+      beams), 1.5 to 2.1 m above the road, anywhere along the street
+      (objects from a few metres to over 60 m away), in either lane;
+      azimuth step x0.8-1.5, range noise x0.5-2.
+    - ``"mobile"``: 5 to 15 m/s, 100 to 250 rotations per second, 0.05
+      to 0.2 degrees between pulses, one or both profilers, either lane,
+      2.0 to 2.6 m above the road.
+    - ``"ugv"``: as ``"spinning"`` with the 16 and 32 beam sensors at 0.5
+      to 1.2 m.
+    - ``"aerial"``: 4 to 16 pulses per m2, the flight lines shifted.
+
+    Parameters
+    ----------
+    scanner : str
+        A key of ``SCAN_PATTERNS``.
+    street : Street
+        The street (its length and lanes).
+    rng : numpy.random.RandomState
+        The generator.
+    fixed : dict or None
+        Numbers not to draw.
+
+    Returns
+    -------
+    conf : dict
+        The pattern's numbers, as :func:`resolve_pattern` returns them.
+    """
+    u = rng.uniform
+    lane = street.right_lane * (1.0 if rng.random_sample() < 0.5 else -1.0)
+    if scanner in ("spinning", "ugv"):
+        names = sorted(SPINNING_SENSORS)
+        if scanner == "ugv":
+            names = ["hdl32", "vlp16"]
+        sensor = names[int(rng.randint(len(names)))]
+        spec = SPINNING_SENSORS[sensor]
+        drawn = {
+            "elevations": spec["elevations"],
+            "azimuth_step": spec["azimuth_step"] * u(0.8, 1.5),
+            "range_noise": spec["range_noise"] * u(0.5, 2.0),
+            "height": u(1.5, 2.1) if scanner == "spinning" else u(0.5, 1.2),
+            "position": (u(-0.2, 1.2) * street.length, lane),
+        }
+        if scanner == "spinning":
+            drawn["sensor"] = sensor
+    elif scanner == "mobile":
+        one = rng.random_sample() < 0.3
+        drawn = {
+            "speed": u(5.0, 15.0),
+            "rotation_rate": u(100.0, 250.0),
+            "angular_step": u(0.05, 0.2),
+            "height": u(2.0, 2.6),
+            "lane": lane,
+            "range_noise": u(0.004, 0.02),
+        }
+        if one:
+            drawn["plane_azimuths"] = (45.0,) if rng.random_sample() < 0.5 else (-45.0,)
+    else:
+        drawn = {
+            "density": u(4.0, 16.0),
+            "line_offsets": tuple(
+                np.asarray(SCAN_PATTERNS["aerial"]["line_offsets"]) + u(-100, 100)
+            ),
+        }
+    drawn.update(fixed or {})
+    return resolve_pattern(scanner, drawn)
 
 
 def _mobile(conf, street):
@@ -284,7 +444,7 @@ def _ugv(conf, street):
 # standard normal quantiles at (i + 0.5) / 65536: 16 bits of a hash index them
 _GAUSS = ndtri((np.arange(1 << 16) + 0.5) / (1 << 16))
 
-_PLANNERS = {"mobile": _mobile, "aerial": _aerial, "ugv": _ugv}
+_PLANNERS = {"mobile": _mobile, "aerial": _aerial, "ugv": _ugv, "spinning": _ugv}
 
 
 def plan_scan(scanner, conf, street):

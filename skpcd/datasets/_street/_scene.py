@@ -24,6 +24,7 @@ from skpcd.datasets._street._scanners import (
     apply_footprint,
     build_grid,
     plan_scan,
+    randomise_pattern,
     resolve_pattern,
     scan,
 )
@@ -40,8 +41,8 @@ __all__ = [
 # the object classes make_street_objects can cut out
 STREET_OBJECT_CLASSES = OBJECT_CLASSES
 
-# the classes it returns by default (all but fence)
-_DEFAULT_CLASSES = tuple(c for c in OBJECT_CLASSES if c != "fence")
+# the classes it returns by default (all but fence and person)
+_DEFAULT_CLASSES = tuple(c for c in OBJECT_CLASSES if c not in ("fence", "person"))
 
 _CLASS_NAMES = np.array(STREET_CLASSES, dtype=object)
 
@@ -323,6 +324,7 @@ def _attach_ground(obj, base_z, ground_sorted, ground_x, margin):
         "ground_margin": [Interval(Real, 0, None, closed="left")],
         "min_points": [Interval(Integral, 1, None, closed="left")],
         "segment_length": [Interval(Real, 10, None, closed="left")],
+        "randomise": ["boolean"],
         "random_state": ["random_state"],
         "n_jobs": [Integral, None],
     },
@@ -338,6 +340,7 @@ def make_street_objects(
     ground_margin=0.25,
     min_points=50,
     segment_length=60.0,
+    randomise=False,
     random_state=None,
     n_jobs=None,
 ):
@@ -382,6 +385,15 @@ def make_street_objects(
     segment_length : float, default=60.0
         Length of each simulated street. A mobile survey drives 12 m beyond
         both ends, so that objects near the ends are seen by both scanners.
+    randomise : bool, default=False
+        Domain randomisation, for training on simulated objects what is
+        applied to real ones: each street draws its own scanner numbers
+        around the pattern's (see :func:`randomise_pattern`: the sensor,
+        its height, where it stands or drives, its speed and angular step,
+        the noise; ``scanner_params`` still fix what they name), and each
+        object loses the points of its lowest 0 to 0.35 m (drawn per
+        object) with the ground at its foot in half of the objects, as a
+        ground filter or a labelling box cuts real objects.
     random_state : int, RandomState instance or None, default=None
         Seeds the streets and the scans.
     n_jobs : int, default=None
@@ -443,6 +455,8 @@ def make_street_objects(
         seed = int(rng.randint(0, 2**31 - 1))
         street = Street(layout_rng, segment_length)
         street.drive = (-12.0, segment_length + 12.0)
+        if randomise:
+            conf = randomise_pattern(scanner, street, rng, scanner_params)
         # ask for a little more than needed: some will be hidden
         ask = {c: int(np.ceil(v * 1.2)) + 1 for c, v in need.items()}
         plan = furnish(street, layout_rng, wanted=ask)
@@ -469,10 +483,14 @@ def make_street_objects(
                 continue
             i = entry["id"]
             obj = xyz[order[bounds[i] : bounds[i + 1]]]
+            margin = ground_margin
+            if randomise:
+                obj = obj[obj[:, 2] >= entry["position"][2] + rng.uniform(0, 0.35)]
+                margin = ground_margin if rng.random_sample() < 0.5 else 0.0
             if len(obj) < min_points:
                 continue
             obj = _attach_ground(
-                obj, entry["position"][2], ground, ground[:, 0], ground_margin
+                obj, entry["position"][2], ground, ground[:, 0], margin
             )
             found[cls].append(obj + shift)
     short = {c: len(v) for c, v in found.items() if len(v) < n}
