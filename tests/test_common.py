@@ -6,7 +6,12 @@ from sklearn.tree import DecisionTreeClassifier
 from sklearn.utils import estimator_checks as sk
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
-from skpcd.classification import CaseBasedClassifier, RejectUnknown, TwoStepClassifier
+from skpcd.classification import (
+    CaseBasedClassifier,
+    RejectUnknown,
+    SimulationAugmented,
+    TwoStepClassifier,
+)
 from skpcd.datasets import make_point_clouds, make_urban_objects
 from skpcd.encoding import BagOfFeatures
 from skpcd.features import (
@@ -73,6 +78,8 @@ TWO_D = [
         DecisionTreeClassifier(random_state=0), groups="auto", cv=2, random_state=0
     ),
     RejectUnknown(LogisticRegression()),
+    # labels the street simulator does not know: no simulated object is added
+    SimulationAugmented(LogisticRegression()),
 ]
 
 # Every expected failure of sklearn's checks, with its reason.
@@ -89,6 +96,7 @@ EXPECTED_FAILED_CHECKS = {
     # about label 2) and a single group without step one (y in {1, 2}). All
     # checks pass, as they do with groups=None.
     "TwoStepClassifier": {},
+    "SimulationAugmented": {},
     "RejectUnknown": {
         "check_classifiers_train": (
             "predict answers -1 (unknown) where the best probability is below "

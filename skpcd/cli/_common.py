@@ -226,9 +226,22 @@ def load_labelled(args):
 
 
 def load_model_for(args, command):
-    """The model of ``args.model``, refused when it cannot predict."""
+    """The model of ``args.model``, refused when it cannot predict; the
+    shipped street model, said in one line on stderr, when none is given."""
     from skpcd.io import load_model
 
+    if args.model is None:
+        from skpcd.classification import load_street_model
+
+        model, info = load_street_model(return_info=True)
+        args.model = "the shipped street model"
+        print(
+            f"skpcd {command}: no model given, using the shipped street model "
+            f"{info['metadata']['model_version']} (simulated streets only; "
+            "pass a model written by skpcd fit for your own classes)",
+            file=sys.stderr,
+        )
+        return model
     model = load_model(args.model, trust_pickle=args.trust_pickle)
     if not hasattr(model, "predict"):
         raise CommandError(

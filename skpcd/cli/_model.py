@@ -41,6 +41,28 @@ def add_parsers(sub):
     )
     fit.add_argument("-o", "--output", required=True, help="model file (.skpcd)")
     fit.add_argument("--random-state", type=int, default=0, help="seed (default 0)")
+    fit.add_argument(
+        "--simulate",
+        type=int,
+        metavar="N",
+        help="add N simulated objects of every labelled class the street simulator "
+        "knows (car, person, pole, tree, traffic_sign...) to the real ones "
+        "(SimulationAugmented): for a handful of real labels",
+    )
+    fit.add_argument(
+        "--scanner",
+        choices=["auto", "spinning", "mobile", "ugv"],
+        default="auto",
+        help="scan pattern of the simulated objects with --simulate (default auto: "
+        "the one whose objects label your segments best)",
+    )
+    fit.add_argument(
+        "--real-weight",
+        type=float,
+        default=None,
+        help="weight of a real segment against a simulated one with --simulate "
+        "(default: SimulationAugmented's)",
+    )
     add_n_jobs(fit)
     add_skip_unreadable(fit)
     add_output_options(fit)
@@ -49,13 +71,22 @@ def add_parsers(sub):
 
     pred = sub.add_parser(
         "predict",
-        help="label segments with a saved model",
-        description="Predict the class of every segment of a folder; the CSV has "
+        help="label segments with a saved model (the shipped street model when "
+        "none is given)",
+        description="Predict the class of every segment of a folder with a model "
+        "written by skpcd fit, or with the street model shipped with skpcd when "
+        "none is given; the CSV has "
         "file, label and the probability (or, for a case-based model, the "
         "similarity) of each answer.",
     )
-    pred.add_argument("model", help="a model written by skpcd fit")
-    pred.add_argument("folder", help="folder of per-segment files")
+    pred.add_argument(
+        "paths",
+        nargs="+",
+        metavar="[MODEL] FOLDER",
+        help="a model written by skpcd fit (default: the shipped street model, "
+        "fitted on simulated streets), then the folder of per-segment files",
+    )
+    pred.add_argument("--model", dest="model_option", help="the model, as an option")
     pred.add_argument("-o", "--output", required=True, help="predictions CSV")
     add_skip_unreadable(pred)
     add_output_options(pred)
@@ -84,9 +115,17 @@ def run_fit(args):
     model = make_named_pipeline(
         args.pipeline, random_state=args.random_state, n_jobs=args.n_jobs
     )
+    if args.simulate is not None:
+        model = _augmented(model, args)
     start = time.perf_counter()
     model.fit(clouds, y)
     print(f"fit       {time.perf_counter() - start:.1f} s")
+    if args.simulate is not None:
+        print(
+            f"simulated {model.n_simulated_} objects of "
+            f"{', '.join(model.simulated_classes_) or 'no class'}"
+            + (f" ({model.scanner_} pattern)" if model.scanner_ else "")
+        )
     metadata = {
         "data": source,
         "n_segments": len(clouds),
@@ -99,10 +138,47 @@ def run_fit(args):
     return 0
 
 
+def _model_and_folder(args):
+    """``[MODEL] FOLDER`` or ``--model MODEL FOLDER`` into args.model, args.folder."""
+    paths = args.paths
+    if len(paths) > 2 or (len(paths) == 2 and args.model_option):
+        raise CommandError(
+            "predict",
+            f"expected [MODEL] FOLDER, got {len(paths)} paths"
+            + (" and --model" if args.model_option else ""),
+        )
+    args.folder = paths[-1]
+    args.model = paths[0] if len(paths) == 2 else args.model_option
+
+
+def _augmented(pipeline, args):
+    """The pipeline inside SimulationAugmented, as ``--simulate`` asks."""
+    from skpcd.classification import SimulationAugmented
+
+    if args.simulate < 1:
+        raise CommandError("fit", f"--simulate must be at least 1, got {args.simulate}")
+    kw = {} if args.real_weight is None else {"real_weight": args.real_weight}
+    if args.real_weight is not None and not args.real_weight > 0:
+        raise CommandError(
+            "fit", f"--real-weight must be positive, got {args.real_weight}"
+        )
+    return SimulationAugmented(
+        pipeline,
+        n_per_class=args.simulate,
+        scanner=args.scanner,
+        random_state=args.random_state,
+        n_jobs=args.n_jobs,
+        **kw,
+    )
+
+
 def run_predict(args):
     from skpcd.io._atomic import atomic_path
 
-    out = check_output(args.output, args, "predict", inputs=[args.model])
+    _model_and_folder(args)
+    out = check_output(
+        args.output, args, "predict", inputs=[args.model] if args.model else []
+    )
     check_folder(args.folder, "predict")
     model = load_model_for(args, "predict")
     clouds, _, names, files = read_folder(args)

@@ -121,9 +121,11 @@ def add_parsers(sub):
 
     ident = sub.add_parser(
         "identify",
-        help="segment a scene and label each segment with a saved model",
+        help="segment a scene and label each segment (the shipped street model "
+        "unless --model)",
         description="Segment a scene as 'skpcd segment' does, predict the class "
-        "of each segment with a model written by 'skpcd fit' (facade and wire "
+        "of each segment with a model written by 'skpcd fit', or with the "
+        "street model shipped with skpcd when no --model is given (facade and wire "
         "segments are classed facade and wire, not predicted), and write the "
         "scene with per-point fields segment (-1: none), class, ground and the "
         "probability or similarity of the answer. A LAS/LAZ scene written as "
@@ -133,7 +135,11 @@ def add_parsers(sub):
         "index (-1: none). Class names also go to OUTPUT.classes.csv.",
     )
     ident.add_argument("scene", help="a point-cloud file")
-    ident.add_argument("--model", required=True, help="a model written by skpcd fit")
+    ident.add_argument(
+        "--model",
+        help="a model written by skpcd fit (default: the shipped street model, "
+        "fitted on simulated streets)",
+    )
     ident.add_argument(
         "-o", "--output", required=True, help="labelled scene (.las .laz .ply .pcd...)"
     )
@@ -346,7 +352,7 @@ def run_identify(args):
     from skpcd.io import write_labelled_scan
     from skpcd.io._atomic import PARTIAL_MARK, atomic_path
 
-    inputs = [args.scene, args.model]
+    inputs = [args.scene] + ([args.model] if args.model else [])
     out = check_output(args.output, args, "identify", inputs=inputs)
     legend = check_output(
         side_file(out, "classes.csv"), args, "identify", inputs=inputs

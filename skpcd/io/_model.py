@@ -51,17 +51,21 @@ _MAX_HEADER = 16 * 2**20
 #: The types a skops model file may name, beyond those skops trusts by itself
 #: (builtins, NumPy arrays and dtypes, SciPy sparse matrices, every public
 #: scikit-learn estimator): skpcd's estimators, scikit-learn's decision tree
-#: storage (checked after loading, see :func:`load_model`), NumPy's
+#: storage (checked after loading, see :func:`load_model`), its fitted
+#: calibrators (the temperature of the shipped street model), NumPy's
 #: polynomial (:class:`~skpcd.segmentation.AutoEpsDBSCAN` keeps its fitted
 #: curve as one), and the splitters and default scorer that a fitted
 #: :class:`~sklearn.model_selection.GridSearchCV` keeps. None of them runs
 #: code named by the file when it is rebuilt.
 TRUSTED_TYPES = (
     "numpy.polynomial.polynomial.Polynomial",
+    "sklearn.calibration._CalibratedClassifier",
+    "sklearn.calibration._TemperatureScaling",
     "sklearn.metrics._scorer._PassthroughScorer",
     "sklearn.model_selection._split.KFold",
     "sklearn.model_selection._split.StratifiedKFold",
     "sklearn.tree._tree.Tree",
+    "skpcd.classification._augmented.SimulationAugmented",
     "skpcd.classification._case_based.CaseBasedClassifier",
     "skpcd.classification._reject.RejectUnknown",
     "skpcd.classification._two_step.TwoStepClassifier",

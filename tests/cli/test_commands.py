@@ -613,3 +613,68 @@ def test_scheduler_unreachable_or_missing(tmp_path, monkeypatch, labelled_folder
     with pytest.raises(SystemExit, match="pip install 'skpcd\\[dask\\]'"):
         main([*args, "--scheduler", "tcp://127.0.0.1:9"])
     assert not (tmp_path / "d.npz").exists()
+
+
+def _street_folder(folder, n_per_class=3, random_state=6):
+    """Simulated car-mounted spinning-sensor objects (cars, people) written
+    one file each, with labels.csv; returns the labels."""
+    from skpcd.datasets import make_street_objects
+
+    clouds, labels = make_street_objects(
+        n_per_class,
+        classes=["car", "person"],
+        scanner="spinning",
+        min_points=20,
+        random_state=random_state,
+    )
+    folder.mkdir(exist_ok=True)
+    rows = ["file,label"]
+    for i, (c, y) in enumerate(zip(clouds, labels)):
+        write_point_cloud(folder / f"{i:03d}.xyz", c)
+        rows.append(f"{i:03d}.xyz,{y}")
+    (folder / "labels.csv").write_text("\n".join(rows))
+    return labels
+
+
+def test_predict_without_a_model_uses_the_shipped_street_model(tmp_path, capsys):
+    from skpcd.classification import STREET_MODEL_CLASSES
+
+    labels = _street_folder(tmp_path / "seg")
+    out = tmp_path / "pred.csv"
+    assert main(["predict", str(tmp_path / "seg"), "-o", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("no model given, using the shipped street model street-") == 1
+    rows = [line.split(",") for line in out.read_text().splitlines()[1:]]
+    assert len(rows) == len(labels)
+    assert {r[1] for r in rows} <= set(STREET_MODEL_CLASSES)
+    # the two-path form and --model name the model; three paths are refused
+    with pytest.raises(SystemExit, match="expected \\[MODEL\\] FOLDER"):
+        main(["predict", "a", "b", "c", "-o", str(tmp_path / "p2.csv")])
+
+
+def test_identify_without_a_model_uses_the_shipped_street_model(
+    tmp_path, capsys, scene_file
+):
+    scene_file(tmp_path / "scene.ply", n_per_class=1)
+    out = tmp_path / "labelled.ply"
+    argv = ["identify", str(tmp_path / "scene.ply"), "-o", str(out), "--quiet"]
+    assert main([*argv, "--ground", "aerial"]) == 0
+    assert "using the shipped street model" in capsys.readouterr().err
+    legend = (tmp_path / "labelled.ply.classes.csv").read_text()
+    assert out.exists() and "person" in legend and "street_light" in legend
+
+
+def test_fit_simulate_adds_simulated_objects(tmp_path, capsys):
+    from skpcd.classification import SimulationAugmented
+    from skpcd.io import load_model
+
+    _street_folder(tmp_path / "seg", n_per_class=2)
+    model_path = tmp_path / "m.skpcd"
+    argv = ["fit", str(tmp_path / "seg"), "-o", str(model_path), "--quiet"]
+    assert main([*argv, "--simulate", "2", "--scanner", "spinning"]) == 0
+    out = capsys.readouterr().out
+    assert "simulated 4 objects of car, person (spinning pattern)" in out
+    model = load_model(model_path)
+    assert isinstance(model, SimulationAugmented) and model.n_simulated_ == 4
+    with pytest.raises(SystemExit, match="--simulate must be at least 1"):
+        main([*argv[:-1], "--overwrite", "--simulate", "0"])

@@ -515,7 +515,7 @@ def test_randomised_objects_vary_the_scanner():
 
 
 def test_person_stands_on_the_pavement():
-    clouds, labels = make_street_objects(
+    clouds, _ = make_street_objects(
         3, classes=["person"], scanner="spinning", min_points=20, random_state=4
     )
     for cloud in clouds:

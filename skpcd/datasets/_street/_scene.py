@@ -126,7 +126,7 @@ def make_street_scene(
     ----------
     length : float, default=100.0
         Length of the street in metres (along ``x``, from 0).
-    scanner : {"mobile", "aerial", "ugv"}, default="mobile"
+    scanner : {"mobile", "aerial", "ugv", "spinning"}, default="mobile"
         The scan pattern; its default numbers are in
         ``skpcd.datasets.SCAN_PATTERNS[scanner]``:
 
@@ -148,6 +148,11 @@ def make_street_scene(
           the road in the middle of the street (HDL-32E vertical angles
           -30.67 to +10.67 degrees, 0.16 degree azimuth step), 1-100 m
           range, 2 cm noise.
+        - ``"spinning"``: one sweep of a spinning multi-beam sensor on a
+          car's roof, 1.73 m above the right lane in the middle of the
+          street: ``scanner_params={"sensor": ...}`` picks the beams of
+          ``"vlp16"``, ``"hdl32"``, ``"hdl64"`` (the default, KITTI's),
+          ``"pandar64"`` (PandaSet's) or ``"os128"``; 2-120 m range.
     scanner_params : dict or None, default=None
         Overrides of the pattern's numbers, e.g. ``{"speed": 5.0}`` or
         ``{"angular_step": 0.2, "plane_azimuths": (45.0,)}`` (one scanner).
@@ -367,9 +372,9 @@ def make_street_objects(
         The classes, among ``STREET_OBJECT_CLASSES`` (``"pole"``,
         ``"lamp_post"``, ``"street_light"``, ``"traffic_light"``,
         ``"pedestrian_signal"``, ``"traffic_sign"``, ``"tree"``, ``"car"``,
-        ``"bush"``, ``"other"``, ``"fence"``); None takes all but
-        ``"fence"``.
-    scanner : {"mobile", "aerial", "ugv"}, default="mobile"
+        ``"bush"``, ``"other"``, ``"fence"``, ``"person"``); None takes all
+        but ``"fence"`` and ``"person"``.
+    scanner : {"mobile", "aerial", "ugv", "spinning"}, default="mobile"
         The scan pattern (see :func:`make_street_scene`). With ``"ugv"``
         each street is swept once from its middle, so distant objects are
         sparse.
@@ -388,7 +393,7 @@ def make_street_objects(
     randomise : bool, default=False
         Domain randomisation, for training on simulated objects what is
         applied to real ones: each street draws its own scanner numbers
-        around the pattern's (see :func:`randomise_pattern`: the sensor,
+        around the pattern's (the sensor,
         its height, where it stands or drives, its speed and angular step,
         the noise; ``scanner_params`` still fix what they name), and each
         object loses the points of its lowest 0 to 0.35 m (drawn per
