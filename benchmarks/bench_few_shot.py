@@ -10,12 +10,14 @@ others
 - ``simulation + real``: :class:`skpcd.classification.SimulationAugmented`
   (its defaults unless ``--real-weight``/``--n-per-class``) on the same;
 
-and, as ``k = 0``, the shipped street model
+and, as ``k = all``, 5-fold cross-validation of the default and the
+street pipeline over every labelled object (a user with many labels); and,
+as ``k = 0``, the shipped street model
 (:func:`skpcd.classification.load_street_model`, no real label) on every
 object. Scores are the balanced accuracy over the classes of the folder
-that the street model knows (labels are mapped: ``other_object`` ->
-``other``; classes it does not know, and classes with fewer than
-``max(shots) + 3`` objects, are left out), and the recall per class.
+that the street model knows with at least 3 objects (labels are mapped:
+``other_object`` -> ``other``; the few-shot rows only over the classes with
+at least ``max(shots) + 2``), and the recall per class.
 
 ``../shared/data/real_mobile/objects`` is the set the defaults were chosen
 on; the folders of ``../shared/data/extra_real`` (SemanticKITTI sequence
@@ -31,24 +33,32 @@ The results go to ``benchmarks/results/few_shot_<folder>.{json,txt}``.
 """
 
 import argparse
+import itertools
 import json
 import os
 import platform
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 from sklearn.metrics import balanced_accuracy_score
+from sklearn.model_selection import StratifiedKFold, cross_val_predict
 
 from skpcd.classification import (
     STREET_MODEL_CLASSES,
     SimulationAugmented,
     load_street_model,
+    make_default_pipeline,
     make_street_pipeline,
 )
 from skpcd.io import read_segments
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+from bench_simulation import _commit  # noqa: E402
+
 REAL = HERE.parent.parent / "shared/data/real_mobile/objects"
 ALIASES = {"other_object": "other"}
 
@@ -69,6 +79,33 @@ def scores(truth, pred):
     return {
         "balanced_accuracy": float(balanced_accuracy_score(truth, pred)),
         "recall": {c: float((pred[truth == c] == c).mean()) for c in classes},
+    }
+
+
+def reliability(proba, classes, truth, n_bins=10):
+    """Expected calibration error, the reliability table (confidence bins:
+    count, mean confidence, accuracy) and what asking for "unknown" below a
+    threshold leaves: the share answered and its accuracy."""
+    conf = proba.max(axis=1)
+    correct = classes[proba.argmax(axis=1)] == truth
+    edges = np.linspace(0, 1, n_bins + 1)
+    table, ece = [], 0.0
+    for lo, hi in itertools.pairwise(edges):
+        m = (conf > lo) & (conf <= hi)
+        if m.any():
+            table.append([lo, hi, int(m.sum()), conf[m].mean(), correct[m].mean()])
+            ece += m.mean() * abs(conf[m].mean() - correct[m].mean())
+    unknown = {
+        t: [float((conf >= t).mean()), float(correct[conf >= t].mean())]
+        for t in (0.4, 0.5, 0.6, 0.7)
+        if (conf >= t).any()
+    }
+    return {
+        "ece": float(ece),
+        "accuracy": float(correct.mean()),
+        "mean_confidence": float(conf.mean()),
+        "bins": table,
+        "unknown_below": unknown,
     }
 
 
@@ -94,11 +131,25 @@ def main(argv=None):
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     folder = Path(args.real)
-    clouds, labels = load(folder, max(args.shots) + 3)
+    clouds, labels = load(folder, 3)
     out = Path(args.out or HERE / "results" / f"few_shot_{folder.name}")
-    shipped = np.asarray(load_street_model().predict(clouds))
+    model = load_street_model()
+    proba = model.predict_proba(clouds)
+    shipped = model.classes_[proba.argmax(axis=1)]
     rows = [{"k": 0, "method": "shipped model", **scores(labels, shipped)}]
     print(f"k=0 shipped model {rows[0]['balanced_accuracy']:.3f}", flush=True)
+    calibrated = model[-1].estimator_
+    raw = calibrated.estimator.estimator.predict_proba(model[:-1].transform(clouds))
+    calibration = {
+        "calibrated": reliability(proba, model.classes_, labels),
+        "uncalibrated": reliability(raw, model.classes_, labels),
+    }
+    # few shots: the classes with enough objects to draw max(shots) and test
+    names, counts = np.unique(labels, return_counts=True)
+    few = np.isin(labels, names[counts >= max(args.shots) + 2])
+    few_shot_classes = sorted(names[counts >= max(args.shots) + 2].tolist())
+    clouds = [c for c, k in zip(clouds, few) if k]
+    all_labels, labels = labels, labels[few]
     kw = {"scanner": args.scanner, "n_jobs": -1}
     if args.real_weight is not None:
         kw["real_weight"] = args.real_weight
@@ -132,15 +183,26 @@ def main(argv=None):
                 f"{time.perf_counter() - t0:.0f} s",
                 flush=True,
             )
+    # many labels: 5-fold cross-validation over every labelled object
+    folds = StratifiedKFold(5, shuffle=True, random_state=0)
+    for name, make in (
+        ("default pipeline", make_default_pipeline),
+        ("street pipeline", make_street_pipeline),
+    ):
+        pred = cross_val_predict(make(n_jobs=-1), clouds, labels, cv=folds)
+        rows.append({"k": "all", "method": name, **scores(labels, np.asarray(pred))})
+        print(f"all labels, {name}: {rows[-1]['balanced_accuracy']:.3f}", flush=True)
     meta = {
         "real": str(folder),
-        "classes": {c: int((labels == c).sum()) for c in np.unique(labels)},
+        "classes": {c: int((all_labels == c).sum()) for c in np.unique(all_labels)},
+        "few_shot_classes": few_shot_classes,
         "repeats": args.repeats,
         "augmented": {
             k: v
             for k, v in SimulationAugmented(**kw).get_params().items()
             if k != "estimator"
         },
+        "commit": _commit(),
         "machine": f"{platform.machine()} {os.cpu_count()} cores",
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "street_model": load_street_model(return_info=True)[1]["metadata"][
@@ -149,32 +211,56 @@ def main(argv=None):
     }
     out.parent.mkdir(parents=True, exist_ok=True)
     out.with_suffix(".json").write_text(
-        json.dumps({"meta": meta, "rows": rows}, indent=1)
+        json.dumps({"meta": meta, "calibration": calibration, "rows": rows}, indent=1)
     )
     classes = sorted(meta["classes"])
     lines = [
         f"Few-shot identification on {folder} ("
         + ", ".join(f"{c} {n}" for c, n in meta["classes"].items())
         + ")",
-        f"k real objects per class drawn {args.repeats} times, scored on the others;"
-        f" k = 0: the shipped model ({meta['street_model']}) on all; {meta['date']},"
-        f" {meta['machine']}",
+        f"k real objects per class of {', '.join(few_shot_classes)} drawn "
+        f"{args.repeats} times, scored on the others; k = 0: the shipped model "
+        f"({meta['street_model']}) on every object; commit {meta['commit']}, "
+        f"{meta['date']}, {meta['machine']}",
         f"SimulationAugmented: {meta['augmented']}",
         "",
         f"{'k':>3s} {'method':18s} {'balanced':>14s}  "
         + " ".join(f"{c[:8]:>8s}" for c in classes),
     ]
-    for k in [0, *args.shots]:
-        for method in ("shipped model", "real only", "simulation + real"):
+    methods = (
+        "shipped model",
+        "real only",
+        "simulation + real",
+        "default pipeline",
+        "street pipeline",
+    )
+    for k in [0, *args.shots, "all"]:
+        for method in methods:
             sel = [r for r in rows if r["k"] == k and r["method"] == method]
             if not sel:
                 continue
             b = [r["balanced_accuracy"] for r in sel]
-            rec = [np.mean([r["recall"][c] for r in sel]) for c in classes]
+            rec = [np.mean([r["recall"].get(c, np.nan) for r in sel]) for c in classes]
             lines.append(
-                f"{k:3d} {method:18s} {np.mean(b):6.3f} +/- {np.std(b):.3f}  "
-                + " ".join(f"{x:8.3f}" for x in rec)
+                f"{k!s:>3s} {method:18s} {np.mean(b):6.3f} +/- {np.std(b):.3f}  "
+                + " ".join("       -" if np.isnan(x) else f"{x:8.3f}" for x in rec)
             )
+    cal, unc = calibration["calibrated"], calibration["uncalibrated"]
+    lines += [
+        "",
+        f"shipped model on all {len(all_labels)} objects: accuracy "
+        f"{cal['accuracy']:.3f}, "
+        f"mean confidence {cal['mean_confidence']:.3f}, expected calibration error "
+        f"{cal['ece']:.3f} (uncalibrated forest {unc['ece']:.3f}, mean confidence "
+        f"{unc['mean_confidence']:.3f})",
+        "reliability: confidence bin, objects, mean confidence, accuracy",
+        *(
+            f"  {lo:.1f}-{hi:.1f} {n:5d} {c:6.3f} {a:6.3f}"
+            for lo, hi, n, c, a in cal["bins"]
+        ),
+        "unknown below a threshold: share answered, accuracy of the answers",
+        *(f"  {t:.1f}: {f:.3f} {a:.3f}" for t, (f, a) in cal["unknown_below"].items()),
+    ]
     out.with_suffix(".txt").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

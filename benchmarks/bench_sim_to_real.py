@@ -41,7 +41,7 @@ import argparse
 import json
 import os
 import platform
-import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -58,6 +58,10 @@ from skpcd.datasets import make_street_objects
 from skpcd.io import read_segments
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+from bench_simulation import _commit  # noqa: E402
+
 REAL = Path(
     os.environ.get(
         "SKPCD_REAL_MOBILE_DIR", HERE.parent.parent / "shared/data/real_mobile"
@@ -145,19 +149,6 @@ def score(pred, truth):
         }
     rows["balanced_accuracy"] = float(np.mean([rows[c]["recall"] for c in SCORED]))
     return rows
-
-
-def _commit():
-    try:
-        return subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            capture_output=True,
-            text=True,
-            cwd=HERE,
-            check=True,
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def run(name, args, real, truth):

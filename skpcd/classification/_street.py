@@ -7,6 +7,7 @@ from sklearn.ensemble import RandomForestClassifier
 from sklearn.pipeline import FeatureUnion, Pipeline
 
 from skpcd.classification._reject import RejectUnknown
+from skpcd.datasets import STREET_OBJECT_CLASSES
 from skpcd.features import PFHTransformer, ShapeFeatures, VerticalProfile
 from skpcd.preprocessing import GridSampler
 
@@ -25,20 +26,10 @@ STREET_MODEL_PATH = Path(__file__).with_name("street_model.skpcd")
 # how close the shipped model's answers on its probe clouds must stay
 _PROBE_TOLERANCE = 1e-6
 
-#: The classes of the shipped street model.
-STREET_MODEL_CLASSES = (
-    "pole",
-    "lamp_post",
-    "street_light",
-    "traffic_light",
-    "pedestrian_signal",
-    "traffic_sign",
-    "tree",
-    "car",
-    "bush",
-    "other",
-    "person",
-)
+#: The classes of the shipped street model: every object class of the street
+#: simulator but ``fence`` (long fences are cut into pieces of any length by a
+#: segmentation; they are left to the user's own labels).
+STREET_MODEL_CLASSES = tuple(c for c in STREET_OBJECT_CLASSES if c != "fence")
 
 #: The grid (m) each segment is sampled on before the street pipeline
 #: describes it.

@@ -5,6 +5,7 @@ from skpcd.datasets._primitives import PRIMITIVES, make_primitives
 from skpcd.datasets._random import make_point_clouds
 from skpcd.datasets._street import (
     SCAN_PATTERNS,
+    SPINNING_SENSORS,
     STREET_CLASSES,
     STREET_OBJECT_CLASSES,
     make_street_objects,
@@ -16,6 +17,7 @@ __all__ = [
     "DALES_ENV",
     "PRIMITIVES",
     "SCAN_PATTERNS",
+    "SPINNING_SENSORS",
     "STREET_CLASSES",
     "STREET_OBJECT_CLASSES",
     "URBAN_CLASSES",

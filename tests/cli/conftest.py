@@ -14,6 +14,27 @@ def _labelled_folder(folder, n_per_class=6, random_state=1):
     clouds, labels = make_urban_objects(
         n_per_class=n_per_class, random_state=random_state
     )
+    return write_labelled(folder, clouds, labels)
+
+
+def _street_folder(folder, n_per_class=3, random_state=6):
+    """Simulated objects of a car-mounted spinning sensor (cars, people)
+    written as ``_labelled_folder`` does; returns the labels."""
+    from skpcd.datasets import make_street_objects
+
+    clouds, labels = make_street_objects(
+        n_per_class,
+        classes=["car", "person"],
+        scanner="spinning",
+        min_points=20,
+        random_state=random_state,
+    )
+    return write_labelled(folder, clouds, labels)
+
+
+def write_labelled(folder, clouds, labels):
+    """``clouds`` written to ``folder`` one ``.xyz`` file each, with
+    ``labels.csv``; returns the labels."""
     folder.mkdir(exist_ok=True)
     rows = ["file,label"]
     for i, (c, y) in enumerate(zip(clouds, labels)):
@@ -42,6 +63,12 @@ def _scene_file(path, n_per_class=2, random_state=0):
 def labelled_folder():
     """``labelled_folder(folder, n_per_class=6, random_state=1)``."""
     return _labelled_folder
+
+
+@pytest.fixture
+def street_folder():
+    """``street_folder(folder, n_per_class=3, random_state=6)``."""
+    return _street_folder
 
 
 @pytest.fixture

@@ -615,31 +615,12 @@ def test_scheduler_unreachable_or_missing(tmp_path, monkeypatch, labelled_folder
     assert not (tmp_path / "d.npz").exists()
 
 
-def _street_folder(folder, n_per_class=3, random_state=6):
-    """Simulated car-mounted spinning-sensor objects (cars, people) written
-    one file each, with labels.csv; returns the labels."""
-    from skpcd.datasets import make_street_objects
-
-    clouds, labels = make_street_objects(
-        n_per_class,
-        classes=["car", "person"],
-        scanner="spinning",
-        min_points=20,
-        random_state=random_state,
-    )
-    folder.mkdir(exist_ok=True)
-    rows = ["file,label"]
-    for i, (c, y) in enumerate(zip(clouds, labels)):
-        write_point_cloud(folder / f"{i:03d}.xyz", c)
-        rows.append(f"{i:03d}.xyz,{y}")
-    (folder / "labels.csv").write_text("\n".join(rows))
-    return labels
-
-
-def test_predict_without_a_model_uses_the_shipped_street_model(tmp_path, capsys):
+def test_predict_without_a_model_uses_the_shipped_street_model(
+    tmp_path, capsys, street_folder
+):
     from skpcd.classification import STREET_MODEL_CLASSES
 
-    labels = _street_folder(tmp_path / "seg")
+    labels = street_folder(tmp_path / "seg")
     out = tmp_path / "pred.csv"
     assert main(["predict", str(tmp_path / "seg"), "-o", str(out), "--quiet"]) == 0
     err = capsys.readouterr().err
@@ -664,11 +645,11 @@ def test_identify_without_a_model_uses_the_shipped_street_model(
     assert out.exists() and "person" in legend and "street_light" in legend
 
 
-def test_fit_simulate_adds_simulated_objects(tmp_path, capsys):
+def test_fit_simulate_adds_simulated_objects(tmp_path, capsys, street_folder):
     from skpcd.classification import SimulationAugmented
     from skpcd.io import load_model
 
-    _street_folder(tmp_path / "seg", n_per_class=2)
+    street_folder(tmp_path / "seg", n_per_class=2)
     model_path = tmp_path / "m.skpcd"
     argv = ["fit", str(tmp_path / "seg"), "-o", str(model_path), "--quiet"]
     assert main([*argv, "--simulate", "2", "--scanner", "spinning"]) == 0

@@ -484,7 +484,7 @@ def test_a_class_the_scanner_cannot_see_is_a_clear_error():
 def test_spinning_sensor_rings(sensor):
     """A spinning sensor's returns lie on its beams' cones: their elevation
     angles seen from the sensor are the sensor's, to the ray jitter."""
-    from skpcd.datasets._street._scanners import SPINNING_SENSORS
+    from skpcd.datasets import SPINNING_SENSORS
 
     scene = make_street_scene(
         30.0,

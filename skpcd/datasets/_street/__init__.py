@@ -7,6 +7,7 @@ loop), ``_scanners`` (scan patterns and their default numbers),
 ``_scene`` (the public functions).
 """
 
+from skpcd.datasets._street._scanners import SPINNING_SENSORS
 from skpcd.datasets._street._scene import (
     SCAN_PATTERNS,
     STREET_CLASSES,
@@ -17,6 +18,7 @@ from skpcd.datasets._street._scene import (
 
 __all__ = [
     "SCAN_PATTERNS",
+    "SPINNING_SENSORS",
     "STREET_CLASSES",
     "STREET_OBJECT_CLASSES",
     "make_street_objects",
