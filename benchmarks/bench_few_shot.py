@@ -155,7 +155,9 @@ def main(argv=None):
         kw["real_weight"] = args.real_weight
     if args.n_per_class is not None:
         kw["n_per_class"] = args.n_per_class
-    for k in args.shots:
+    # with fewer than two classes to learn there is nothing to compare
+    shots = args.shots if len(few_shot_classes) >= 2 else []
+    for k in shots:
         for rep in range(args.repeats):
             rng = np.random.RandomState(1000 * k + rep)
             train, test = draw(labels, k, rng)
@@ -188,7 +190,7 @@ def main(argv=None):
     for name, make in (
         ("default pipeline", make_default_pipeline),
         ("street pipeline", make_street_pipeline),
-    ):
+    )[: 2 if shots else 0]:
         pred = cross_val_predict(make(n_jobs=-1), clouds, labels, cv=folds)
         rows.append({"k": "all", "method": name, **scores(labels, np.asarray(pred))})
         print(f"all labels, {name}: {rows[-1]['balanced_accuracy']:.3f}", flush=True)
@@ -218,8 +220,13 @@ def main(argv=None):
         f"Few-shot identification on {folder} ("
         + ", ".join(f"{c} {n}" for c, n in meta["classes"].items())
         + ")",
-        f"k real objects per class of {', '.join(few_shot_classes)} drawn "
-        f"{args.repeats} times, scored on the others; k = 0: the shipped model "
+        (
+            f"k real objects per class of {', '.join(few_shot_classes)} drawn "
+            f"{args.repeats} times, scored on the others"
+            if shots
+            else "no few-shot rows (fewer than two classes with enough objects)"
+        )
+        + "; k = 0: the shipped model "
         f"({meta['street_model']}) on every object; commit {meta['commit']}, "
         f"{meta['date']}, {meta['machine']}",
         f"SimulationAugmented: {meta['augmented']}",
@@ -234,7 +241,7 @@ def main(argv=None):
         "default pipeline",
         "street pipeline",
     )
-    for k in [0, *args.shots, "all"]:
+    for k in [0, *shots, "all"]:
         for method in methods:
             sel = [r for r in rows if r["k"] == k and r["method"] == method]
             if not sel:

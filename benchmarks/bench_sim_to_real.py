@@ -27,6 +27,9 @@ gain of one realism change on real data:
 - ``mixed+spacing``: the same objects, each segment first sampled on a
   grid of :data:`~skpcd.classification.STREET_VOXEL` metres
   (:func:`skpcd.classification.make_street_pipeline`).
+- ``mixed+spacing+traffic``: half the simulated cars drive in the lanes
+  (``make_street_objects(traffic=True)``), seen from behind and ahead as
+  the traffic around a car-mounted sensor is.
 
 Run from the repository root (about 15 minutes; simulated sets are cached
 in ``--cache``)::
@@ -102,10 +105,15 @@ def simulate(kind, n_per_class, seed, cache):
         clouds, labels = make_street_objects(n_per_class, scanner="mobile", **common)
     elif kind == "spinning":
         clouds, labels = make_street_objects(n_per_class, scanner="spinning", **common)
-    elif kind in ("randomised-spinning", "randomised-mobile"):
-        scanner = kind.split("-")[1]
+    elif kind.startswith("randomised-"):
+        scanner = kind.split("-")[-1]
         clouds, labels = simulate_objects(
-            STREET_MODEL_CLASSES, n_per_class, scanner, seed, n_jobs=-1
+            STREET_MODEL_CLASSES,
+            n_per_class,
+            scanner,
+            seed,
+            n_jobs=-1,
+            traffic="-traffic-" in kind,
         )
     else:
         raise ValueError(kind)
@@ -127,6 +135,10 @@ RECIPES = {
     "randomised+spacing": (["randomised-spinning"], "street"),
     "mixed": (["randomised-spinning", "randomised-mobile"], "default"),
     "mixed+spacing": (["randomised-spinning", "randomised-mobile"], "street"),
+    "mixed+spacing+traffic": (
+        ["randomised-traffic-spinning", "randomised-traffic-mobile"],
+        "street",
+    ),
 }
 
 

@@ -1,7 +1,7 @@
 """Rebuild the street model shipped in ``skpcd/classification/street_model.skpcd``.
 
 Simulated objects only (:func:`skpcd.datasets.make_street_objects` with
-``randomise=True``), so the file carries the project's licence: for each
+``randomise=True`` and ``traffic=True``), so the file carries the project's licence: for each
 scan pattern of ``--scanners``, ``--n-per-class`` objects of every class of
 :data:`skpcd.classification.STREET_MODEL_CLASSES`, fitted with
 :func:`skpcd.classification.make_street_pipeline`, its probabilities
@@ -96,6 +96,8 @@ def main(argv=None):
         "recipe": {
             "scanners": scanners,
             "n_per_class": args.n_per_class,
+            "randomise": True,
+            "traffic": True,
             "seed": args.seed,
             "voxel_size": STREET_VOXEL,
             "calibration": "temperature scaling on simulated objects of seed + 100",

@@ -159,6 +159,11 @@ def load_street_model(*, unknown_threshold=None, return_info=False):
     from skpcd.exceptions import IncompatibleModelError
     from skpcd.io import load_model
 
+    if unknown_threshold is not None and not 0 <= unknown_threshold <= 1:
+        raise ValueError(
+            f"unknown_threshold must be a probability in [0, 1] or None, got "
+            f"{unknown_threshold!r}"
+        )
     model, info = load_model(STREET_MODEL_PATH, return_info=True, check_versions=False)
     probe = info["metadata"].get("probe", {})
     clouds = [np.asarray(c, dtype=np.float64) for c in probe.get("clouds", [])]

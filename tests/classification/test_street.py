@@ -66,6 +66,8 @@ def test_unknown_threshold(shipped):
         "unknown"
     ]
     assert load_street_model(unknown_threshold=None).predict(clouds)[0] != "unknown"
+    with pytest.raises(ValueError, match="unknown_threshold must be a probability"):
+        load_street_model(unknown_threshold=1.5)
 
 
 def test_a_model_that_answers_differently_is_refused(tmp_path, monkeypatch):

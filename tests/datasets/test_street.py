@@ -521,3 +521,31 @@ def test_person_stands_on_the_pavement():
     for cloud in clouds:
         assert 0.9 <= np.ptp(cloud[:, 2]) <= 2.0
         assert np.ptp(cloud[:, 0]) < 1.6 and np.ptp(cloud[:, 1]) < 1.6
+
+
+def test_traffic_puts_cars_in_the_lanes_but_not_on_the_sensor():
+    """traffic=True: some cars drive in the lanes (|y| under half the widest
+    carriageway, 3.6 m), none without it; no car stands within 7 m of a
+    spinning sensor in its own lane."""
+    kw = {"classes": ["car"], "scanner": "spinning", "min_points": 20}
+    parked, _ = make_street_objects(6, random_state=1, **kw)
+    mixed, _ = make_street_objects(6, traffic=True, random_state=1, **kw)
+
+    def in_lane(clouds):
+        return sum(abs(np.median(c[:, 1])) < 3.6 - 0.9 for c in clouds)
+
+    assert in_lane(parked) == 0 and in_lane(mixed) >= 1
+    from skpcd.datasets._street._layout import Street, furnish
+
+    street = Street(np.random.RandomState(0), 60.0)
+    plan = furnish(
+        street,
+        np.random.RandomState(1),
+        wanted={"car": 40},
+        traffic=True,
+        clear={0: (23.0, 37.0)},
+    )
+    lane_y = abs(street.right_lane)
+    for cls, _, params, (x, y, _z), _rot, _yaw in plan.items:
+        if cls == "car" and y < 0 and abs(abs(y) - lane_y) < 0.5:
+            assert not (23.0 - params["length"] / 2 < x < 37.0 + params["length"] / 2)

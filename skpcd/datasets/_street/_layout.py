@@ -193,7 +193,7 @@ class _Plan:
         self.strips = {
             (side, s): _Strip(0.5, L - 0.5)
             for side in (0, 1)
-            for s in ("kerb", "inner", "garden", "parking", "edge")
+            for s in ("kerb", "inner", "garden", "parking", "edge", "lane")
         }
 
     def _y(self, side, strip, depth):
@@ -212,6 +212,8 @@ class _Plan:
             if st.garden[side] <= 0:
                 return None
             d = st.line(side, "pavement") + 0.15
+        elif strip == "lane":  # driving in the middle of a lane
+            d = st.carriageway / 4 + _u(rng, -0.25, 0.25)
         else:  # parking
             if st.parking[side] <= 0:
                 return None
@@ -356,8 +358,9 @@ def _utility_pole(rng):
     }
 
 
-def _requested(plan, wanted):
-    """As many objects of the wanted classes as fit (for make_street_objects)."""
+def _requested(plan, wanted, traffic=False):
+    """As many objects of the wanted classes as fit (for make_street_objects);
+    with ``traffic`` half the cars drive in the lanes."""
     rng, st = plan.rng, plan.street
     need = dict(wanted)
     for side in (0, 1):
@@ -366,7 +369,8 @@ def _requested(plan, wanted):
             classes = [c for c, v in need.items() if v > 0]
             weights = np.array([need[c] for c in classes], float)
             cls = classes[int(rng.choice(len(classes), p=weights / weights.sum()))]
-            if plan.place(cls, side, tries=4):
+            strip = "lane" if cls == "car" and traffic and rng.random() < 0.5 else None
+            if plan.place(cls, side, strip=strip, tries=4):
                 need[cls] -= 1
                 misses = 0
             else:
@@ -377,13 +381,17 @@ def _requested(plan, wanted):
             _park(plan, side, 0.5)
 
 
-def furnish(street, rng, wanted=None):
-    """Objects of a street: the natural mix, or the ``wanted`` counts per class."""
+def furnish(street, rng, wanted=None, traffic=False, clear=None):
+    """Objects of a street: the natural mix, or the ``wanted`` counts per class
+    (with ``traffic``, half the cars in the lanes, none in the x ranges of
+    ``clear``, ``{side: (x0, x1)}``, of a lane: where the scanner is)."""
     plan = _Plan(street, rng)
+    for side, (x0, x1) in (clear or {}).items():
+        plan.strips[(side, "lane")].take(x0, x1)
     if wanted is None:
         _natural(plan)
     else:
-        _requested(plan, wanted)
+        _requested(plan, wanted, traffic)
     return plan
 
 

@@ -320,6 +320,18 @@ def _attach_ground(obj, base_z, ground_sorted, ground_x, margin):
     return np.vstack([obj, cand[np.isfinite(d)]])
 
 
+def _scanner_lane(scanner, conf, street):
+    """``{side: (x0, x1)}``: the stretch of lane a scanner occupies (a
+    spinning sensor's car, a mobile system's whole drive)."""
+    if scanner in ("spinning", "ugv"):
+        x, y = conf["position"] or (street.length / 2, street.right_lane)
+        return {int(y > 0): (x - 7.0, x + 7.0)}
+    if scanner == "mobile":
+        lane = street.right_lane if conf["lane"] is None else conf["lane"]
+        return {int(lane > 0): (-np.inf, np.inf)}
+    return {}
+
+
 @validate_params(
     {
         "n_per_class": [Interval(Integral, 1, None, closed="left")],
@@ -330,6 +342,7 @@ def _attach_ground(obj, base_z, ground_sorted, ground_x, margin):
         "min_points": [Interval(Integral, 1, None, closed="left")],
         "segment_length": [Interval(Real, 10, None, closed="left")],
         "randomise": ["boolean"],
+        "traffic": ["boolean"],
         "random_state": ["random_state"],
         "n_jobs": [Integral, None],
     },
@@ -346,6 +359,7 @@ def make_street_objects(
     min_points=50,
     segment_length=60.0,
     randomise=False,
+    traffic=False,
     random_state=None,
     n_jobs=None,
 ):
@@ -399,6 +413,10 @@ def make_street_objects(
         object loses the points of its lowest 0 to 0.35 m (drawn per
         object) with the ground at its foot in half of the objects, as a
         ground filter or a labelling box cuts real objects.
+    traffic : bool, default=False
+        Half the cars drive in the lanes (seen from behind and ahead, as
+        the traffic around a car-mounted sensor) instead of all being
+        parked; the lane of the scanner is kept clear around it.
     random_state : int, RandomState instance or None, default=None
         Seeds the streets and the scans.
     n_jobs : int, default=None
@@ -464,7 +482,8 @@ def make_street_objects(
             conf = randomise_pattern(scanner, street, rng, scanner_params)
         # ask for a little more than needed: some will be hidden
         ask = {c: int(np.ceil(v * 1.2)) + 1 for c, v in need.items()}
-        plan = furnish(street, layout_rng, wanted=ask)
+        clear = _scanner_lane(scanner, conf, street) if traffic else None
+        plan = furnish(street, layout_rng, wanted=ask, traffic=traffic, clear=clear)
         scene, frame = build_scene(street, plan, layout_rng)
         # only rays that can reach a wanted object (or the ground at its
         # foot) are cast: exact for those objects, and much cheaper
