@@ -1,13 +1,13 @@
 """Rebuild the street model shipped in ``skpcd/classification/street_model.skpcd``.
 
 Simulated objects only (:func:`skpcd.datasets.make_street_objects` with
-``randomise=True`` and ``traffic=True``), so the file carries the project's licence: for each
-scan pattern of ``--scanners``, ``--n-per-class`` objects of every class of
-:data:`skpcd.classification.STREET_MODEL_CLASSES`, fitted with
-:func:`skpcd.classification.make_street_pipeline`, its probabilities
-calibrated by temperature scaling on simulated objects of another seed. The
-recipe is the one
-``bench_sim_to_real.py`` ranked first on real scans; the file keeps it in
+``randomise=True`` and ``traffic=True``), so the file carries the project's
+licence: for each scan pattern of ``--scanners``, ``--n-per-class`` objects
+of every class of :data:`skpcd.classification.STREET_MODEL_CLASSES`,
+fitted with :func:`skpcd.classification.make_street_pipeline`, its
+probabilities calibrated by temperature scaling on simulated objects of
+another seed. The recipe is the one ``bench_sim_to_real.py`` ranked first
+on real scans; the file keeps it in
 its metadata, with a model version and probe clouds whose answers
 :func:`skpcd.classification.load_street_model` checks at every load.
 

@@ -8,7 +8,9 @@ from sklearn.pipeline import FeatureUnion, Pipeline
 
 from skpcd.classification._reject import RejectUnknown
 from skpcd.datasets import STREET_OBJECT_CLASSES
+from skpcd.exceptions import IncompatibleModelError
 from skpcd.features import PFHTransformer, ShapeFeatures, VerticalProfile
+from skpcd.io import load_model
 from skpcd.preprocessing import GridSampler
 
 __all__ = [
@@ -156,9 +158,6 @@ def load_street_model(*, unknown_threshold=None, return_info=False):
     >>> "car" in model.classes_ and "person" in model.classes_
     True
     """
-    from skpcd.exceptions import IncompatibleModelError
-    from skpcd.io import load_model
-
     if unknown_threshold is not None and not 0 <= unknown_threshold <= 1:
         raise ValueError(
             f"unknown_threshold must be a probability in [0, 1] or None, got "
