@@ -16,7 +16,7 @@ from skpcd.classification import (
 )
 from skpcd.datasets import make_street_objects
 from skpcd.exceptions import IncompatibleModelError
-from skpcd.io import load_model, save_model
+from skpcd.io import save_model
 
 REAL = Path(
     os.environ.get(
@@ -71,12 +71,31 @@ def test_unknown_threshold(shipped):
 
 
 def test_a_model_that_answers_differently_is_refused(tmp_path, monkeypatch):
-    model, info = load_model(STREET_MODEL_PATH, return_info=True, check_versions=False)
-    meta = info["metadata"]
-    proba = np.asarray(meta["probe"]["proba"])
-    meta["probe"]["proba"] = np.roll(proba, 1, axis=1).tolist()
-    path = save_model(model, tmp_path / "street.skpcd", metadata=meta)
-    monkeypatch.setattr(_street, "STREET_MODEL_PATH", path)
+    """The probe check: a model file whose stored answers match loads, one
+    whose answers differ (as after a scikit-learn change) is refused."""
+    clouds, labels = make_street_objects(
+        2,
+        classes=["car", "person"],
+        scanner="spinning",
+        min_points=20,
+        random_state=9,
+    )
+    model = make_street_pipeline().set_params(classifier__estimator__n_estimators=5)
+    model.fit(clouds, labels)
+    probe = [np.round(c[:60], 3) for c in clouds]
+    meta = {
+        "model_version": "street-test",
+        "probe": {
+            "clouds": [c.tolist() for c in probe],
+            "proba": model.predict_proba(probe).tolist(),
+        },
+    }
+    good = save_model(model, tmp_path / "good.skpcd", metadata=meta)
+    monkeypatch.setattr(_street, "STREET_MODEL_PATH", good)
+    assert load_street_model().classes_.tolist() == ["car", "person"]
+    meta["probe"]["proba"] = np.roll(meta["probe"]["proba"], 1, axis=1).tolist()
+    bad = save_model(model, tmp_path / "bad.skpcd", metadata=meta)
+    monkeypatch.setattr(_street, "STREET_MODEL_PATH", bad)
     with pytest.raises(IncompatibleModelError, match=r"build_street_model\.py"):
         load_street_model()
 
