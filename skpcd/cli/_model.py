@@ -82,11 +82,14 @@ def add_parsers(sub):
     pred.add_argument(
         "paths",
         nargs="+",
-        metavar="[MODEL] FOLDER",
-        help="a model written by skpcd fit (default: the shipped street model, "
-        "fitted on simulated streets), then the folder of per-segment files",
+        metavar="PATH",
+        help="[MODEL] FOLDER: a model written by skpcd fit (default: the shipped "
+        "street model, fitted on simulated streets), then the folder of "
+        "per-segment files",
     )
-    pred.add_argument("--model", dest="model_option", help="the model, as an option")
+    pred.add_argument(
+        "--model", dest="model_option", metavar="MODEL", help="the model, as an option"
+    )
     pred.add_argument("-o", "--output", required=True, help="predictions CSV")
     add_skip_unreadable(pred)
     add_output_options(pred)
