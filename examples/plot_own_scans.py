@@ -70,7 +70,9 @@ for c in np.unique(truth[known]):
 # %%
 # The sweep, coloured by the answer
 # ---------------------------------
-# Top view; grey: ground, facades, wires and segments of fewer than 20 points.
+# Top view; grey: ground, facades, wires and segments of fewer than 20 points. The
+# pieces of wall that the segmentation leaves as objects (along the building lines)
+# get a class too: what to do with them is the segmentation's business.
 classes = list(model.classes_)
 palette = plt.get_cmap("tab20")(np.arange(len(classes)))
 fig, ax = plt.subplots(figsize=(9, 4.5), layout="constrained")
@@ -84,13 +86,13 @@ for j, c in enumerate(classes):
         ax.scatter(
             *points[sel, :2].T, s=1.5, color=palette[j], label=c, rasterized=True
         )
-ax.plot(*scene.trajectory[0, :2], "k*", ms=12, label="sensor")
+ax.plot(*scene.trajectory[0, :2], "k*", ms=3, label="sensor")
 ax.set_aspect("equal")
 ax.set_xlim(-5, 65)
 ax.set_ylim(-20, 20)
 ax.set_xlabel("x (m)")
 ax.set_ylabel("y (m)")
-ax.legend(fontsize="x-small", ncols=2, loc="upper right", markerscale=4)
+ax.legend(fontsize="x-small", loc="upper left", bbox_to_anchor=(1.01, 1), markerscale=4)
 ax.set_title("segments labelled by the shipped street model")
 
 # %%
