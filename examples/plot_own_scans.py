@@ -100,9 +100,10 @@ ax.set_title("segments labelled by the shipped street model")
 # ------------------------
 # Three labelled segments per class, here cut from other simulated sweeps (a user
 # would label segments of the survey with ``skpcd segment`` and a ``labels.csv``).
-# ``SimulationAugmented`` adds 30 simulated objects of each of these classes, with
-# the scan pattern whose simulated objects label the real ones best, and counts each
-# real segment five times; a model of the three segments per class alone is the
+# ``SimulationAugmented`` adds 20 simulated objects of each of these classes, here of
+# spinning sensors (its default, ``scanner="auto"``, also tries profilers and keeps
+# the kind whose simulated objects label your segments best), and counts each real
+# segment five times; a model of the three segments per class alone is the
 # comparison.
 few, few_labels = make_street_objects(
     3,
@@ -112,10 +113,10 @@ few, few_labels = make_street_objects(
     min_points=20,
     random_state=70,
 )
-augmented = SimulationAugmented(n_per_class=30, random_state=0).fit(few, few_labels)
+augmented = SimulationAugmented(n_per_class=20, scanner="spinning", random_state=0)
+augmented.fit(few, few_labels)
 alone = make_street_pipeline().fit(few, few_labels)
 test = np.isin(truth, augmented.classes_)
 for name, m in (("3 per class + simulation", augmented), ("3 per class alone", alone)):
     right = (m.predict([clouds[i] for i in np.flatnonzero(test)]) == truth[test]).mean()
     print(f"{name:25s} right on {test.sum()} segments of those classes: {right:.0%}")
-print(f"pattern chosen: {augmented.scanner_} ({augmented.scanner_scores_})")
