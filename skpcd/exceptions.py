@@ -10,6 +10,7 @@ __all__ = [
     "MissingFileError",
     "NonFiniteWarning",
     "PointCloudFileError",
+    "SegmentationWarning",
     "SkippedFilesWarning",
     "UntrustedModelError",
 ]
@@ -56,6 +57,15 @@ class SkippedFilesWarning(UserWarning):
 
     Raised by :func:`skpcd.io.read_segments` with ``errors="skip"``; the
     message names every file skipped and why.
+    """
+
+
+class SegmentationWarning(UserWarning):
+    """An automatic choice of the segmentation was corrected for this scan.
+
+    Raised by :func:`skpcd.segmentation.segment_scene` when the automatic
+    eps joined a segment spanning most of the scene: the message gives the
+    radius used instead and the parameter to set.
     """
 
 

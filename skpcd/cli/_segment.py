@@ -1,7 +1,9 @@
 """``skpcd segment SCENE -o FOLDER`` and ``skpcd identify SCENE --model M -o OUT``."""
 
 import csv
+import json
 import re
+import sys
 import tempfile
 import time
 from contextlib import ExitStack
@@ -33,11 +35,22 @@ def add_segmentation_options(p):
     """The options of :func:`skpcd.segmentation.segment_scene`."""
     p.add_argument(
         "--ground",
-        choices=("csf", "aerial", "mobile", "none"),
-        default="csf",
-        help="ground removal preset (GroundFilter): csf, the cloth simulation "
-        "filter (needs the package cloth-simulation-filter); aerial or mobile, "
-        "SMRF (the only ones with --tile-size); or none (default csf)",
+        choices=("auto", "street", "csf", "aerial", "mobile", "none"),
+        default="auto",
+        help="ground removal preset (GroundFilter): auto, chosen from what the "
+        "scan is (aerial for an airborne tile, street for the others; said on "
+        "stderr); street, the cloth simulation filter with the bases of objects "
+        "given back; csf, the cloth simulation filter alone; aerial or mobile, "
+        "SMRF (the only ones with --tile-size); or none (default auto)",
+    )
+    p.add_argument(
+        "--sensor",
+        type=float,
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        default=None,
+        help="position of the sensor of a single sweep, if known (helps "
+        "--ground auto tell a robot from a car)",
     )
     p.add_argument(
         "--no-structures",
@@ -176,6 +189,7 @@ def segment_file(args, command, fields=None):
         result = segment_scene(
             source,
             ground=None if args.ground == "none" else args.ground,
+            sensor=args.sensor,
             method=args.method,
             eps=args.eps,
             eps_scale=args.eps_scale,
@@ -194,6 +208,12 @@ def segment_file(args, command, fields=None):
         ground = np.zeros(len(points), dtype=bool)
         labels[finite], ground[finite] = result.labels, result.ground
         result = result._replace(labels=labels, ground=ground)
+    if result.scan is not None and not args.quiet:
+        print(
+            f"skpcd {command}: {result.scan.summary()}: "
+            f"ground {result.ground_filter!r} (--ground to choose)",
+            file=sys.stderr,
+        )
     if not args.quiet:
         labels = result.labels
         print(
@@ -233,11 +253,33 @@ def _segments(args, points, extras, result, folder, *, fields=True):
     )
 
 
+def _metadata(args, result):
+    """What ``segmentation.json`` holds: the scene, the scan kind found,
+    the ground filter and the radius used, the options given."""
+    import skpcd
+
+    scan = result.scan
+    return {
+        "scene": str(args.scene),
+        "skpcd": skpcd.__version__,
+        "scan": None if scan is None else {k: getattr(scan, k) for k in scan._fields},
+        "ground": args.ground if result.ground_filter is None else result.ground_filter,
+        "method": args.method,
+        "eps": result.eps,
+        "eps_given": args.eps is not None,
+        "structures": bool(args.structures),
+        "min_size": args.min_size,
+        "max_size": args.max_size,
+        "n_segments": result.n_segments,
+        "n_ground": int(result.ground.sum()),
+    }
+
+
 def _written_by_segment(name):
     """The entries ``skpcd segment`` writes in its folder."""
-    from skpcd.io._api import SEGMENTS_SUMMARY
+    from skpcd.io._api import SEGMENTATION_METADATA, SEGMENTS_SUMMARY
 
-    return name == SEGMENTS_SUMMARY or bool(
+    return name in (SEGMENTS_SUMMARY, SEGMENTATION_METADATA) or bool(
         re.fullmatch(rf"segment_\d{{4,}}\.({'|'.join(SEGMENT_FORMATS)})", name)
     )
 
@@ -245,7 +287,7 @@ def _written_by_segment(name):
 def run_segment(args):
     from skpcd.exceptions import MissingFileError
     from skpcd.io import write_point_cloud
-    from skpcd.io._api import SEGMENTS_SUMMARY
+    from skpcd.io._api import SEGMENTATION_METADATA, SEGMENTS_SUMMARY
     from skpcd.io._atomic import atomic_folder, check_folder_output
 
     out = Path(args.output)
@@ -288,6 +330,8 @@ def run_segment(args):
             )
             for row in rows:
                 writer.writerow(row[:4] + [f"{v:.4f}" for v in row[4:]])
+        with open(tmp / SEGMENTATION_METADATA, "w") as f:
+            json.dump(_metadata(args, result), f, indent=1)
     if not args.quiet:
         print(f"written   {n} {args.format} files and {SEGMENTS_SUMMARY} -> {out}")
     return 0

@@ -457,6 +457,8 @@ def read_segments(
 # the file names ``skpcd segment`` writes, and its summary
 _SEGMENT_FILE = re.compile(r"segment_\d{4,}\.[a-z]+")
 SEGMENTS_SUMMARY = "segments.csv"
+# what the run chose: the scan kind, the ground filter, eps (JSON)
+SEGMENTATION_METADATA = "segmentation.json"
 
 
 def _check_segment_run(folder, names):

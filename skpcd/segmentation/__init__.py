@@ -1,7 +1,9 @@
 """Scene segmentation: ground removal, DBSCAN with automatic eps, Euclidean clusters.
 
 A scene becomes object segments in a few steps: :class:`GroundFilter`
-removes the terrain (the cloth simulation filter by default, or SMRF),
+removes the terrain (chosen from what :func:`describe_scan` finds the scan
+to be: SMRF for airborne tiles, the cloth simulation filter with the bases
+of objects given back for street scans),
 facades and overhead wires are taken out as segments of their own,
 :class:`AutoEpsDBSCAN` or :class:`EuclideanClusters` cluster the rest and
 clusters holding several vertical trunks are split; :func:`segment_scene`
@@ -13,19 +15,23 @@ memory.
 from skpcd.segmentation._clusters import EuclideanClusters, euclidean_clusters
 from skpcd.segmentation._dbscan import AutoEpsDBSCAN, estimate_eps, plot_eps_curve
 from skpcd.segmentation._ground import GROUND_PRESETS, GroundFilter
+from skpcd.segmentation._scan_kind import SCAN_KINDS, ScanKind, describe_scan
 from skpcd.segmentation._scene import SceneSegmentation, make_scene, segment_scene
 from skpcd.segmentation._structures import STRUCTURE_DEFAULTS
 from skpcd.segmentation._tiling import TiledScene, TileGrid, tile_scene
 
 __all__ = [
     "GROUND_PRESETS",
+    "SCAN_KINDS",
     "STRUCTURE_DEFAULTS",
     "AutoEpsDBSCAN",
     "EuclideanClusters",
     "GroundFilter",
+    "ScanKind",
     "SceneSegmentation",
     "TileGrid",
     "TiledScene",
+    "describe_scan",
     "estimate_eps",
     "euclidean_clusters",
     "make_scene",

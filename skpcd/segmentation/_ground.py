@@ -36,8 +36,10 @@ __all__ = ["GROUND_PRESETS", "GroundFilter"]
 # is the cloth simulation filter with the defaults of its authors (cloth
 # 1 m, hard cloth, slope smoothing) but a 0.3 m threshold instead of 0.5
 # (benchmarks/bench_ground.py: about half the object points taken as
-# ground, for a ground recall 0.1 to 0.2 % lower, 99.6 % or more), for
-# aerial and street scans alike.
+# ground, for a ground recall 0.1 to 0.2 % lower, 99.6 % or more);
+# "street" is "csf" followed by the pass that gives the bases of objects
+# back (without_bases), the default of the scans made from the street
+# (SCAN_KINDS in _scan_kind.py).
 GROUND_PRESETS = {
     "csf": {
         "method": "csf",
@@ -52,6 +54,14 @@ GROUND_PRESETS = {
         "window": 18.0,
         "threshold": 0.5,
         "scalar": 1.25,
+    },
+    "street": {
+        "method": "csf",
+        "cell": 1.0,
+        "threshold": 0.3,
+        "rigidness": 3,
+        "slope_smooth": True,
+        "keep_bases": True,
     },
     "mobile": {
         "cell": 0.5,
@@ -318,6 +328,59 @@ def _islands(cells, reach):
         label = joined[label]
 
 
+# The second pass of ``keep_bases``: SMRF over the ground points alone, on
+# cells of 0.5 m with a 2 m window (what rises over less than 4 m across, a
+# car, a bin, the foot of a pole or a hedge, is not terrain), and a ground
+# point more than BASE_THRESHOLD above its terrain, or 3 standard deviations
+# of the terrain's roughness when the ground is rougher, is an object's
+# base. Chosen on the real KITTI and PandaSet sweeps of
+# benchmarks/bench_scan_kinds.py (cells 0.25 and 0.5 m, windows 1.5 to
+# 3 m, thresholds 0.07 to 0.15 m compared).
+BASES = {"cell": 0.5, "window": 2.0, "slope": 0.15, "scalar": 1.25}
+BASE_THRESHOLD = 0.1
+
+
+def without_bases(xyz, ground, n_threads=1):
+    """Ground flags without the bases of objects.
+
+    The ground points of a first filter are filtered again by SMRF with
+    ``BASES`` (small cells and window); those above its terrain by more
+    than ``max(BASE_THRESHOLD, 3 * sigma)``, ``sigma`` the robust standard
+    deviation (1.4826 times the median absolute deviation) of the heights
+    of the kept ground points above the terrain, are no longer ground.
+
+    Parameters
+    ----------
+    xyz : ndarray of shape (n_points, 3)
+        The scene.
+    ground : ndarray of shape (n_points,), dtype bool
+        The first filter's flags.
+    n_threads : int, default=1
+        Threads of the second filter.
+
+    Returns
+    -------
+    ground : ndarray of shape (n_points,), dtype bool
+        A copy of ``ground`` with the bases of objects set to False.
+    """
+    idx = np.flatnonzero(ground)
+    if len(idx) < 3:
+        return ground.copy()
+    pts = np.ascontiguousarray(xyz[idx])
+    second = GroundFilter(
+        **BASES, threshold=BASE_THRESHOLD, low_noise=None, n_jobs=n_threads
+    ).fit(pts)
+    kept = second.ground_
+    height = second.height(pts)
+    with np.errstate(invalid="ignore"):
+        sigma = 1.4826 * np.nanmedian(np.abs(height[kept])) if kept.any() else 0.0
+    if 3.0 * sigma > BASE_THRESHOLD:
+        kept = second.set_params(threshold=3.0 * float(sigma)).predict(pts)
+    out = ground.copy()
+    out[idx[~kept]] = False
+    return out
+
+
 class GroundFilter(BaseEstimator):
     """Ground points of a LiDAR scene: morphological (SMRF) or cloth (CSF) filter.
 
@@ -385,6 +448,16 @@ class GroundFilter(BaseEstimator):
         CSF only: largest number of simulation steps.
     time_step : float, default=0.65
         CSF only: step of the simulation.
+    keep_bases : bool, default=False
+        Give the bases of objects back: the ground points are filtered a
+        second time by SMRF with 0.5 m cells and a 2 m window, and those
+        more than 0.1 m (or three standard deviations of the ground's
+        roughness, if more) above that terrain are not ground: the lowest
+        0.1-0.4 m of cars, bins, hedges and poles that CSF or SMRF take
+        for ground on street scans. ``ground_`` (and :meth:`fit_predict`)
+        include this pass; the DEM is built from its ground points with
+        CSF; :meth:`predict` on other points tests them against the DEM
+        only.
     n_jobs : int, default=None
         Threads for SMRF: the passes over the points (the minimum raster,
         the test of each point against the DEM) in parts of the points, the
@@ -511,6 +584,7 @@ class GroundFilter(BaseEstimator):
         "slope_smooth": ["boolean"],
         "iterations": [Interval(Integral, 1, None, closed="left")],
         "time_step": [Interval(Real, 0, None, closed="neither")],
+        "keep_bases": ["boolean"],
         "n_jobs": [Integral, None],
     }
 
@@ -528,6 +602,7 @@ class GroundFilter(BaseEstimator):
         slope_smooth=True,
         iterations=500,
         time_step=0.65,
+        keep_bases=False,
         n_jobs=None,
     ):
         self.method = method
@@ -541,6 +616,7 @@ class GroundFilter(BaseEstimator):
         self.slope_smooth = slope_smooth
         self.iterations = iterations
         self.time_step = time_step
+        self.keep_bases = keep_bases
         self.n_jobs = n_jobs
 
     def _xyz(self, X, reset):
@@ -631,6 +707,13 @@ class GroundFilter(BaseEstimator):
         n_threads = self._n_threads = effective_threads(self.n_jobs)
         if self.method == "csf":
             return self._fit_csf(xyz)
+        self._fit_smrf(xyz, n_threads)
+        if self.keep_bases:
+            self.ground_ = without_bases(xyz, self.ground_, n_threads)
+        return self
+
+    def _fit_smrf(self, xyz, n_threads):
+        """SMRF's terrain model and ground flags (see :meth:`fit`)."""
         if type(self)._minimum_surface is not GroundFilter._minimum_surface:
             # a window of a larger raster (the tiled segmentation)
             lo, zmin = self._minimum_surface(xyz)
@@ -709,6 +792,8 @@ class GroundFilter(BaseEstimator):
             iterations=self.iterations,
             time_step=self.time_step,
         )
+        if self.keep_bases:
+            ground = without_bases(xyz, ground, self._n_threads)
         cell = float(self.cell)
         lo, nx, ny, cells = _cell_indices(xyz, cell, self._n_threads)
         if nx * ny <= len(xyz):

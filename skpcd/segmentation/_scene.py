@@ -47,12 +47,20 @@ class SceneSegmentation(typing.NamedTuple):
     kinds : ndarray of shape (n_segments,), dtype object
         What each segment is: "object", "facade" or "wire" (all "object"
         without ``structures``).
+    scan : ScanKind or None
+        With ``ground="auto"``, what :func:`describe_scan` found the scan
+        to be (which chose the ground filter); None otherwise.
+    ground_filter : str or None
+        The ground preset used (a key of ``GROUND_PRESETS``), None for a
+        filter of your own or none.
     """
 
     labels: np.ndarray
     ground: np.ndarray
     eps: float
     kinds: np.ndarray | None = None
+    scan: typing.Any = None
+    ground_filter: str | None = None
 
     @property
     def n_segments(self):
@@ -63,7 +71,8 @@ class SceneSegmentation(typing.NamedTuple):
 @validate_params(
     {
         "points": ["array-like", str, os.PathLike],
-        "ground": [StrOptions(set(GROUND_PRESETS)), GroundFilter, None],
+        "ground": [StrOptions({"auto", *GROUND_PRESETS}), GroundFilter, None],
+        "sensor": ["array-like", None],
         "method": [StrOptions({"dbscan", "euclidean"})],
         "eps": [Interval(Real, 0, None, closed="neither"), None],
         "eps_scale": [Interval(Real, 0, None, closed="neither")],
@@ -88,7 +97,8 @@ class SceneSegmentation(typing.NamedTuple):
 def segment_scene(
     points,
     *,
-    ground="csf",
+    ground="auto",
+    sensor=None,
     method="dbscan",
     eps=None,
     eps_scale=EPS_SCALE,
@@ -120,20 +130,33 @@ def segment_scene(
         The scene (columns beyond the third are ignored), or a point-cloud
         file. With ``tile_size``, a LAS/LAZ file is streamed in chunks
         (other formats are read whole first).
-    ground : {"csf", "aerial", "mobile"}, GroundFilter or None, default="csf"
+    ground : {"auto", "street", "csf", "aerial", "mobile"}, GroundFilter or None, \
+            default="auto"
         Ground removal: a :class:`GroundFilter` with the parameters of
         ``GROUND_PRESETS[ground]`` ("csf": the cloth simulation filter,
-        through the package ``cloth-simulation-filter``; "aerial" and
-        "mobile": SMRF), a filter of your own
-        (cloned), or None to keep every point. With ``tile_size`` only
-        SMRF (see Notes). The filter runs on the threads of ``n_jobs``
-        (one of your own keeps its ``n_jobs`` unless None).
+        through the package ``cloth-simulation-filter``; "street": the
+        same followed by the pass that gives the bases of objects back,
+        ``keep_bases``; "aerial" and "mobile": SMRF), a filter of your own
+        (cloned), or None to keep every point. "auto" asks
+        :func:`describe_scan` what the scan is and takes
+        ``SCAN_KINDS[kind]["ground"]``: "aerial" for an airborne scan,
+        "street" for the others; with ``tile_size`` the kind is told from
+        a sample of the scan and the filter is "aerial" or "mobile" (SMRF,
+        see Notes). The filter runs on the threads of ``n_jobs`` (one of
+        your own keeps its ``n_jobs`` unless None).
+    sensor : array-like of shape (3,) or None, default=None
+        With ``ground="auto"``, the position of the sensor of a single
+        sweep if known (see :func:`describe_scan`).
     method : {"dbscan", "euclidean"}, default="dbscan"
         :class:`AutoEpsDBSCAN` (eps estimated from the non-ground points
         unless given) or :class:`EuclideanClusters` (every point core; eps
         0.2 unless given).
     eps : float or None, default=None
-        Clustering radius; see ``method``.
+        Clustering radius; see ``method``. An automatic radius that joins
+        a segment covering more than a quarter of the scene's horizontal
+        extent (and more than 50 x 50 m) is halved until none does, at
+        least twice the point spacing, with a :class:`SegmentationWarning`
+        naming the radius used: give ``eps`` to choose it.
     eps_scale : float, default=2.5
         With ``method="dbscan"`` and ``eps=None``, the estimated radius is
         this multiple of the knee distance of :class:`AutoEpsDBSCAN`
@@ -306,18 +329,18 @@ def segment_scene(
                 f"unknown structures parameter(s) {unknown}; known: "
                 f"{sorted(STRUCTURE_DEFAULTS)}"
             )
-    filt = None
-    if ground is not None:
-        filt = (
-            GroundFilter(**GROUND_PRESETS[ground])
-            if isinstance(ground, str)
-            else clone(ground)
+    scan = None
+    if ground == "auto" and tile_size is not None:
+        from skpcd.segmentation._scan_kind import describe_scan
+
+        scan = describe_scan(
+            _scan_sample(points, random_state), sensor=sensor, random_state=random_state
         )
-        if filt.n_jobs is None:
-            filt.set_params(n_jobs=n_jobs)
+        ground = "aerial" if scan.kind == "airborne" else "mobile"
     if tile_size is not None:
         from skpcd.segmentation._tiling import segment_tiled
 
+        filt = _ground_filter(ground, n_jobs)
         if ground is not None:
             filt._validate_params()
             if filt.method != "smrf":
@@ -335,28 +358,30 @@ def segment_scene(
                 "in-memory result. With tile_size pass structures=False, or "
                 "segment in memory"
             )
-        return _with_kinds(
-            *segment_tiled(
-                points,
-                tile_size=float(tile_size),
-                tile_buffer=tile_buffer,
-                ground=filt,
-                method=method,
-                eps=None if eps is None else float(eps),
-                min_samples=min_samples,
-                eps_scale=eps_scale,
-                min_cluster_size=min_cluster_size,
-                max_cluster_size=max_cluster_size,
-                random_state=random_state,
-                n_jobs=n_jobs,
-                temp_folder=temp_folder,
-            )
+        labels, is_ground, used = segment_tiled(
+            points,
+            tile_size=float(tile_size),
+            tile_buffer=tile_buffer,
+            ground=filt,
+            method=method,
+            eps=None if eps is None else float(eps),
+            min_samples=min_samples,
+            eps_scale=eps_scale,
+            min_cluster_size=min_cluster_size,
+            max_cluster_size=max_cluster_size,
+            random_state=random_state,
+            n_jobs=n_jobs,
+            temp_folder=temp_folder,
+        )
+        return _with_kinds(labels, is_ground, used)._replace(
+            scan=scan, ground_filter=ground if isinstance(ground, str) else None
         )
     if isinstance(points, (str, os.PathLike)):
         from skpcd.io import read_point_cloud
 
         points = read_point_cloud(points)
     xyz = check_scene(points)
+    keep = None
     if denoise is not None:
         from skpcd.preprocessing import RadiusOutlierFilter, StatisticalOutlierFilter
 
@@ -369,20 +394,80 @@ def segment_scene(
         else:
             denoiser = clone(denoise)
         keep = np.flatnonzero(np.asarray(denoiser.fit_predict(xyz)) == 1)
-        seg = _segment_xyz(
-            np.ascontiguousarray(xyz[keep]), filt, method, eps, eps_scale,
-            min_samples, min_cluster_size, max_cluster_size, random_state, n_jobs,
-            structures,
-        )  # fmt: skip
-        labels = np.full(len(xyz), -1, dtype=np.int64)
-        labels[keep] = seg.labels
-        is_ground = np.zeros(len(xyz), dtype=bool)
-        is_ground[keep] = seg.ground
-        return SceneSegmentation(labels, is_ground, seg.eps, seg.kinds)
-    return _segment_xyz(
-        xyz, filt, method, eps, eps_scale, min_samples, min_cluster_size,
-        max_cluster_size, random_state, n_jobs, structures,
+        full, xyz = len(xyz), np.ascontiguousarray(xyz[keep])
+    if ground == "auto":
+        from skpcd.segmentation._scan_kind import SCAN_KINDS, describe_scan
+
+        if len(xyz) >= 13:
+            scan = describe_scan(xyz, sensor=sensor, random_state=random_state)
+            ground = SCAN_KINDS[scan.kind]["ground"]
+        else:  # too few points to tell: the filter of street scans
+            ground = SCAN_KINDS["spinning"]["ground"]
+    filt = _ground_filter(ground, n_jobs)
+    is_ground = (
+        np.zeros(len(xyz), dtype=bool) if filt is None else filt.fit_predict(xyz)
+    )
+    seg = _cluster_rest(
+        xyz, is_ground, method=method, eps=eps, eps_scale=eps_scale,
+        min_samples=min_samples, min_cluster_size=min_cluster_size,
+        max_cluster_size=max_cluster_size, random_state=random_state,
+        n_jobs=n_jobs, structures=structures,
     )  # fmt: skip
+    seg = seg._replace(
+        scan=scan, ground_filter=ground if isinstance(ground, str) else None
+    )
+    if keep is None:
+        return seg
+    labels = np.full(full, -1, dtype=np.int64)
+    labels[keep] = seg.labels
+    is_ground = np.zeros(full, dtype=bool)
+    is_ground[keep] = seg.ground
+    return seg._replace(labels=labels, ground=is_ground)
+
+
+def _ground_filter(ground, n_jobs):
+    """The filter of a ``ground`` argument (a preset, a filter, None)."""
+    if ground is None:
+        return None
+    filt = (
+        GroundFilter(**GROUND_PRESETS[ground])
+        if isinstance(ground, str)
+        else clone(ground)
+    )
+    if filt.n_jobs is None:
+        filt.set_params(n_jobs=n_jobs)
+    return filt
+
+
+# Points of a file read to tell the kind of a tiled scan: every k-th point.
+_TILED_SAMPLE = 200_000
+
+
+def _scan_sample(points, random_state):
+    """Up to ``_TILED_SAMPLE`` points of a scan spread over the whole file
+    (one pass, chunk by chunk), or of an array."""
+    from skpcd.io import read_las_extent
+
+    if not isinstance(points, (str, os.PathLike)):
+        xyz = check_scene(points)
+        step = max(1, len(xyz) // _TILED_SAMPLE)
+        return xyz[::step]
+    from skpcd.io import iter_points
+
+    try:
+        n = read_las_extent(points).n_points
+    except ValueError:  # not a LAS/LAZ file: read whole, as segment_tiled does
+        from skpcd.io import read_point_cloud
+
+        xyz = read_point_cloud(points)
+        return xyz[:: max(1, len(xyz) // _TILED_SAMPLE)]
+    step = max(1, n // _TILED_SAMPLE)
+    parts, seen = [], 0
+    for chunk in iter_points(points):
+        first = (-seen) % step
+        parts.append(np.asarray(chunk)[first::step, :3])
+        seen += len(chunk)
+    return np.vstack(parts)
 
 
 def _with_kinds(labels, ground, eps):
@@ -397,17 +482,86 @@ def _kind_names(kinds):
     return np.array(KINDS, dtype=object)[kinds]
 
 
-def _segment_xyz(
-    xyz, filt, method, eps, eps_scale, min_samples, min_cluster_size,
+# The check of an automatic eps: a segment whose horizontal bounding box
+# covers more than this fraction of the scene's, and more than
+# _MERGED_AREA square units, joined what should be apart (a whole tile as
+# one object); the radius is then halved, at most _MERGED_RETRIES times and
+# not below twice the point spacing.
+_MERGED_FRACTION = 0.25
+_MERGED_AREA = 2500.0
+_MERGED_RETRIES = 4
+
+
+def _largest_box(xyz, labels):
+    """Horizontal extent (dx, dy) of the segment whose bounding box has the
+    largest area, and that area."""
+    seg = labels >= 0
+    if not seg.any():
+        return np.zeros(2), 0.0
+    lab = labels[seg]
+    n = int(lab.max()) + 1
+    lo = np.full((n, 2), np.inf)
+    hi = np.full((n, 2), -np.inf)
+    np.minimum.at(lo, lab, xyz[seg, :2])
+    np.maximum.at(hi, lab, xyz[seg, :2])
+    ext = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
+    area = ext.prod(axis=1)
+    i = int(np.argmax(area))
+    return ext[i], float(area[i])
+
+
+def _cluster_rest(
+    xyz, is_ground, *, method, eps, eps_scale, min_samples, min_cluster_size,
+    max_cluster_size, random_state, n_jobs, structures,
+):  # fmt: skip
+    """The segments of the non-ground points, with the check of an
+    automatic eps (see segment_scene)."""
+    import warnings
+
+    from skpcd.exceptions import SegmentationWarning
+    from skpcd.preprocessing import point_spacing
+
+    kw = {
+        "method": method, "eps_scale": eps_scale, "min_samples": min_samples,
+        "min_cluster_size": min_cluster_size, "max_cluster_size": max_cluster_size,
+        "random_state": random_state, "n_jobs": n_jobs, "structures": structures,
+    }  # fmt: skip
+    seg = _segment_rest(xyz, is_ground, eps=eps, **kw)
+    if eps is not None or method != "dbscan" or seg.n_segments == 0:
+        return seg
+    scene = np.ptp(xyz[:, :2], axis=0).prod() if len(xyz) else 0.0
+    first, floor = seg.eps, None
+    for _ in range(_MERGED_RETRIES):
+        ext, area = _largest_box(xyz, seg.labels)
+        if area <= max(_MERGED_FRACTION * scene, _MERGED_AREA):
+            break
+        if floor is None:
+            rest = xyz[~is_ground]
+            floor = 2.0 * point_spacing(rest, random_state=0) if len(rest) > 1 else 0.0
+        smaller = seg.eps / 2
+        if not smaller >= floor:
+            break
+        seg = _segment_rest(xyz, is_ground, eps=smaller, **kw)
+    if seg.eps != first:
+        warnings.warn(
+            f"the automatic eps {first:.3g} joined a segment of {ext[0]:.4g} x "
+            f"{ext[1]:.4g} in a scene of {np.ptp(xyz[:, 0]):.4g} x "
+            f"{np.ptp(xyz[:, 1]):.4g}: eps {seg.eps:.3g} used instead; set eps "
+            "(--eps) to choose the radius",
+            SegmentationWarning,
+            stacklevel=3,
+        )
+    return seg
+
+
+def _segment_rest(
+    xyz, is_ground, *, method, eps, eps_scale, min_samples, min_cluster_size,
     max_cluster_size, random_state, n_jobs, structures=False,
 ):  # fmt: skip
-    """The in-memory segmentation of checked xyz (see segment_scene)."""
+    """The segments of the non-ground points of checked xyz (see
+    segment_scene)."""
     from skpcd.segmentation._dbscan import estimate_eps
 
-    if filt is None:
-        is_ground = np.zeros(len(xyz), dtype=bool)
-    else:
-        is_ground = filt.fit_predict(xyz)
     rest = np.flatnonzero(~is_ground)
     labels = np.full(len(xyz), -1, dtype=np.int64)
     if len(rest) < 2:

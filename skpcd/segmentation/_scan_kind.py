@@ -1,0 +1,207 @@
+"""What kind of scan a cloud is (airborne, car-mounted profiler, spinning
+sensor, robot), read from the points themselves, and the segmentation
+defaults for each kind."""
+
+import typing
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from skpcd.preprocessing import point_spacing
+
+__all__ = ["SCAN_KINDS", "ScanKind", "describe_scan"]
+
+# The kinds and the defaults of segment_scene for each: the ground preset
+# (a key of GROUND_PRESETS) and the eps_scale of the automatic radius. The
+# presets were chosen on real scans (benchmarks/bench_scan_kinds.py, table
+# in the user guide): SMRF with the aerial preset on airborne tiles (CSF
+# loses steep and forested terrain there), CSF followed by the pass that
+# gives object bases back on the scans made from the street.
+SCAN_KINDS = {
+    "airborne": {"ground": "aerial"},
+    "profiler": {"ground": "street"},
+    "spinning": {"ground": "street"},
+    "robot": {"ground": "street"},
+}
+
+# Points drawn for the measurements (the spacing, the shape of the
+# neighbourhoods, the concentration around one position).
+_SAMPLE = 20_000
+_SHAPE_SAMPLE = 3_000
+# A cloud whose planar neighbourhoods are less often vertical (walls, car
+# sides, trunks) than this was seen from above. Measured on 27 real
+# airborne tiles (PDAL's and laspy's test files, the 15 ISPRS filter-test
+# samples): at most 0.10; on 21 real street sweeps (KITTI, PandaSet) at
+# least 0.31, on simulated robot sweeps 0.20.
+_VERTICAL_AIRBORNE = 0.15
+# A single sweep from one position puts half its points within this
+# fraction of the distance that holds 95 % of them (0.13-0.36 measured on
+# real and simulated sweeps; 0.37-0.50 on profiler scans, which spread
+# their points along the trajectory) ...
+_CONCENTRATION_SWEEP = 0.40
+# ... and holds at most this many points (one rotation of a 128-beam
+# sensor: about 260 000; a profiler scan of a street holds millions).
+_MAX_SWEEP_POINTS = 500_000
+# A sensor lower than this above the ground (when given) is on a robot.
+_ROBOT_HEIGHT = 1.2
+
+
+class ScanKind(typing.NamedTuple):
+    """What :func:`describe_scan` returns (a named tuple).
+
+    Attributes
+    ----------
+    kind : str
+        "airborne", "profiler" (a car-mounted mobile-mapping system whose
+        profilers sweep planes as the vehicle drives), "spinning" (one
+        sweep of a multi-beam sensor on a car, as in KITTI or PandaSet) or
+        "robot" (a spinning sensor less than 1.2 m above the ground; told
+        only when the sensor position is given).
+    reason : str
+        The measurement that decided, in words.
+    spacing : float
+        Median distance of a point to its nearest neighbour.
+    vertical : float
+        Fraction of planar neighbourhoods that are vertical.
+    concentration : float
+        Median distance of the points to the position around which they
+        are the most concentrated, over the distance holding 95 % of them.
+    sensor_height : float or None
+        Height of the given sensor above the lowest points near it.
+    """
+
+    kind: str
+    reason: str
+    spacing: float
+    vertical: float
+    concentration: float
+    sensor_height: float | None = None
+
+    def summary(self):
+        """One line for a log: the kind and the measurements."""
+        return (
+            f"{self.kind} scan ({self.reason}; spacing {self.spacing:.3g}, "
+            f"vertical {self.vertical:.2f}, concentration {self.concentration:.2f})"
+        )
+
+
+def describe_scan(points, *, sensor=None, scan_angle=None, random_state=0):
+    """Tell the kind of a scan (airborne, profiler, spinning, robot) from its points.
+
+    :func:`~skpcd.segmentation.segment_scene` uses it with
+    ``ground="auto"`` to pick its ground filter (``SCAN_KINDS[kind]``).
+    The decision, in order:
+
+    1. A ``sensor`` position more than 30 m above the lowest points within
+       50 m of it: airborne. One less than 1.2 m above them: robot.
+    2. ``scan_angle`` (degrees, the LAS field) spread between -45 and 45
+       degrees and not all equal: airborne (a street scanner's angles
+       cover the whole rotation).
+    3. Airborne when fewer than 15 % of the planar neighbourhoods (12
+       nearest neighbours, on 3,000 points) are vertical: seen from above,
+       walls, car sides and trunks get few points.
+    4. Otherwise, a single sweep from one position (spinning) when the
+       points concentrate around one position (half of them within 0.4 of
+       the distance that holds 95 %) and there are at most 500,000 of them;
+       else a profiler scan.
+
+    The thresholds were measured on real scans (PDAL's and laspy's aerial
+    test files, the ISPRS filter-test samples, KITTI and PandaSet sweeps)
+    and simulated ones of every pattern; see the user guide.
+
+    Parameters
+    ----------
+    points : array-like of shape (n_points, 3+)
+        The scan; columns beyond the third are ignored.
+    sensor : array-like of shape (3,) or None, default=None
+        The sensor position (for a single sweep), if known.
+    scan_angle : array-like of shape (n_points,) or None, default=None
+        Scan angle of each point in degrees (LAS ``scan_angle``), if known.
+    random_state : int, RandomState instance or None, default=0
+        Draws the points measured.
+
+    Returns
+    -------
+    scan : ScanKind
+        The kind, the reason and the measurements.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from skpcd.segmentation import describe_scan
+    >>> rng = np.random.default_rng(0)
+    >>> xy = rng.uniform(0, 200, (20000, 2))
+    >>> tile = np.column_stack([xy, rng.normal(0, 0.05, 20000)])
+    >>> describe_scan(tile).kind
+    'airborne'
+    """
+    xyz = np.asarray(points, dtype=np.float64)
+    if xyz.ndim != 2 or xyz.shape[1] < 3 or len(xyz) < 13:
+        raise ValueError(
+            "describe_scan needs an (n_points, 3+) array of at least 13 points, "
+            f"got shape {xyz.shape}"
+        )
+    xyz = xyz[:, :3]
+    rng = np.random.default_rng(
+        random_state
+        if not hasattr(random_state, "randint")
+        else random_state.randint(2**31)
+    )
+    sample = xyz[np.sort(rng.choice(len(xyz), min(len(xyz), _SAMPLE), replace=False))]
+    spacing = point_spacing(xyz, max_points=_SAMPLE, random_state=0)
+    vertical = _vertical_fraction(xyz, sample[:_SHAPE_SAMPLE])
+    concentration = _concentration(sample, rng)
+    measured = {
+        "spacing": float(spacing),
+        "vertical": vertical,
+        "concentration": concentration,
+    }
+    if sensor is not None:
+        sensor = np.asarray(sensor, dtype=np.float64).ravel()
+        if sensor.shape != (3,) or not np.isfinite(sensor).all():
+            raise ValueError(
+                f"sensor must be a finite (x, y, z) position, got {sensor}"
+            )
+        near = np.hypot(*(xyz[:, :2] - sensor[:2]).T) < 50.0
+        if near.any():
+            height = float(sensor[2] - np.quantile(xyz[near, 2], 0.02))
+            measured["sensor_height"] = height
+            if height > 30.0:
+                return ScanKind("airborne", f"sensor {height:.0f} m up", **measured)
+            if height < _ROBOT_HEIGHT:
+                return ScanKind("robot", f"sensor {height:.2f} m up", **measured)
+    if scan_angle is not None:
+        angle = np.asarray(scan_angle, dtype=np.float64)
+        if len(angle) and np.ptp(angle) > 0 and np.abs(angle).max() <= 45.0:
+            return ScanKind("airborne", "scan angles within 45 degrees", **measured)
+    if vertical < _VERTICAL_AIRBORNE:
+        return ScanKind("airborne", "few vertical surfaces", **measured)
+    if concentration < _CONCENTRATION_SWEEP and len(xyz) <= _MAX_SWEEP_POINTS:
+        return ScanKind("spinning", "points around one position", **measured)
+    return ScanKind("profiler", "points spread along a path", **measured)
+
+
+def _vertical_fraction(xyz, queries):
+    """Fraction of the planar neighbourhoods (12 nearest neighbours of the
+    queries) whose normal is within 17 degrees of the horizontal."""
+    k = min(12, len(xyz))
+    _, idx = cKDTree(xyz).query(queries, k=k)
+    nb = xyz[idx] - xyz[idx].mean(axis=1, keepdims=True)
+    values, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb))
+    planar = (values[:, 1] - values[:, 0]) > 0.3 * np.maximum(values[:, 2], 1e-300)
+    vertical = np.abs(vectors[:, 2, 0]) < 0.3
+    return float((vertical & planar).sum() / max(int(planar.sum()), 1))
+
+
+def _concentration(sample, rng):
+    """Median horizontal distance of the points to the one of 200 of them
+    around which that median is smallest, over the 95 % quantile of the
+    distances to it."""
+    xy = sample[:, :2]
+    best, ratio = np.inf, 1.0
+    for c in xy[rng.choice(len(xy), min(len(xy), 200), replace=False)]:
+        d = np.hypot(*(xy - c).T)
+        median = np.median(d)
+        if median < best:
+            best, ratio = median, median / max(np.quantile(d, 0.95), 1e-300)
+    return float(ratio)
