@@ -335,9 +335,11 @@ def _islands(cells, reach):
 # of the terrain's roughness when the ground is rougher, is an object's
 # base. Chosen on the real KITTI and PandaSet sweeps of
 # benchmarks/bench_scan_kinds.py (cells 0.25 and 0.5 m, windows 1.5 to
-# 3 m, thresholds 0.07 to 0.15 m compared).
+# 3 m, thresholds 0.07 to 0.15 m compared: at 0.07 m, 12.6 % of the car
+# points are ground instead of 22.9 % with CSF alone, and 0.68 of the
+# boxed objects are whole instead of 0.57).
 BASES = {"cell": 0.5, "window": 2.0, "slope": 0.15, "scalar": 1.25}
-BASE_THRESHOLD = 0.1
+BASE_THRESHOLD = 0.07
 
 
 def without_bases(xyz, ground, n_threads=1):
@@ -451,7 +453,7 @@ class GroundFilter(BaseEstimator):
     keep_bases : bool, default=False
         Give the bases of objects back: the ground points are filtered a
         second time by SMRF with 0.5 m cells and a 2 m window, and those
-        more than 0.1 m (or three standard deviations of the ground's
+        more than 0.07 m (or three standard deviations of the ground's
         roughness, if more) above that terrain are not ground: the lowest
         0.1-0.4 m of cars, bins, hedges and poles that CSF or SMRF take
         for ground on street scans. ``ground_`` (and :meth:`fit_predict`)

@@ -153,7 +153,7 @@ def segment_scene(
         0.2 unless given).
     eps : float or None, default=None
         Clustering radius; see ``method``. An automatic radius that joins
-        a segment covering more than a quarter of the scene's horizontal
+        a segment covering more than half of the scene's horizontal
         extent (and more than 50 x 50 m) is halved until none does, at
         least twice the point spacing, with a :class:`SegmentationWarning`
         naming the radius used: give ``eps`` to choose it.
@@ -398,15 +398,27 @@ def segment_scene(
     if ground == "auto":
         from skpcd.segmentation._scan_kind import SCAN_KINDS, describe_scan
 
+        defaults = SCAN_KINDS["spinning"]  # too few points to tell
         if len(xyz) >= 13:
             scan = describe_scan(xyz, sensor=sensor, random_state=random_state)
-            ground = SCAN_KINDS[scan.kind]["ground"]
-        else:  # too few points to tell: the filter of street scans
-            ground = SCAN_KINDS["spinning"]["ground"]
+            defaults = SCAN_KINDS[scan.kind]
+        ground = defaults["ground"]
     filt = _ground_filter(ground, n_jobs)
     is_ground = (
         np.zeros(len(xyz), dtype=bool) if filt is None else filt.fit_predict(xyz)
     )
+    if scan is not None and eps is None and method == "dbscan":
+        max_eps = SCAN_KINDS[scan.kind].get("max_eps")
+        rest = xyz[~is_ground]
+        if max_eps is not None and len(rest) >= 2:
+            from skpcd.segmentation._dbscan import estimate_eps
+
+            eps = min(
+                estimate_eps(
+                    rest, eps_scale=eps_scale, random_state=random_state, n_jobs=n_jobs
+                ),
+                max_eps,
+            )
     seg = _cluster_rest(
         xyz, is_ground, method=method, eps=eps, eps_scale=eps_scale,
         min_samples=min_samples, min_cluster_size=min_cluster_size,
@@ -487,7 +499,7 @@ def _kind_names(kinds):
 # _MERGED_AREA square units, joined what should be apart (a whole tile as
 # one object); the radius is then halved, at most _MERGED_RETRIES times and
 # not below twice the point spacing.
-_MERGED_FRACTION = 0.25
+_MERGED_FRACTION = 0.5
 _MERGED_AREA = 2500.0
 _MERGED_RETRIES = 4
 
@@ -530,11 +542,12 @@ def _cluster_rest(
     if eps is not None or method != "dbscan" or seg.n_segments == 0:
         return seg
     scene = np.ptp(xyz[:, :2], axis=0).prod() if len(xyz) else 0.0
-    first, floor = seg.eps, None
+    first, floor, merged = seg.eps, None, None
     for _ in range(_MERGED_RETRIES):
         ext, area = _largest_box(xyz, seg.labels)
         if area <= max(_MERGED_FRACTION * scene, _MERGED_AREA):
             break
+        merged = ext if merged is None else merged
         if floor is None:
             rest = xyz[~is_ground]
             floor = 2.0 * point_spacing(rest, random_state=0) if len(rest) > 1 else 0.0
@@ -544,8 +557,8 @@ def _cluster_rest(
         seg = _segment_rest(xyz, is_ground, eps=smaller, **kw)
     if seg.eps != first:
         warnings.warn(
-            f"the automatic eps {first:.3g} joined a segment of {ext[0]:.4g} x "
-            f"{ext[1]:.4g} in a scene of {np.ptp(xyz[:, 0]):.4g} x "
+            f"the automatic eps {first:.3g} joined a segment of {merged[0]:.4g} x "
+            f"{merged[1]:.4g} in a scene of {np.ptp(xyz[:, 0]):.4g} x "
             f"{np.ptp(xyz[:, 1]):.4g}: eps {seg.eps:.3g} used instead; set eps "
             "(--eps) to choose the radius",
             SegmentationWarning,
