@@ -186,7 +186,7 @@ def kept_aside():
                 "pole": {80, 81},
                 "person": {30},
             },
-        ),  # fmt: skip
+        ),
         "pandaset": (
             {6, 7, 8, 9, 10, 11, 12},
             {"car": {13, 14}, "vegetation": {5}, "pole": {36}, "person": {30, 31}},
