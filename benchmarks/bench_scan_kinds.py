@@ -86,7 +86,8 @@ def segment(method, xyz):
         import open3d as o3d
 
         pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz - xyz.min(0)))
-        _, inliers = pcd.segment_plane(0.2, 3, 1000, seed=0)
+        o3d.utility.random.seed(0)
+        _, inliers = pcd.segment_plane(0.2, 3, 1000)
         g = np.zeros(len(xyz), dtype=bool)
         g[np.asarray(inliers)] = True
     rest = np.flatnonzero(~g)
