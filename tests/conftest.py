@@ -29,6 +29,25 @@ def dales_dir():
     return DALES_DIR
 
 
+REAL_MOBILE_DIR = Path(
+    os.environ.get(
+        "SKPCD_REAL_MOBILE_DIR", ROOT.parent / "shared" / "data" / "real_mobile"
+    )
+)
+
+
+@pytest.fixture(scope="session")
+def real_sweeps():
+    """The real car-mounted sweeps (KITTI, PandaSet) beside the checkout, as
+    LAS paths (missing: skipped, or failed in CI)."""
+    paths = sorted((REAL_MOBILE_DIR / "scans").glob("*.las"))
+    if not paths:
+        if os.environ.get("CI"):
+            pytest.fail(f"the real sweeps are missing from {REAL_MOBILE_DIR}")
+        pytest.skip(f"no real sweeps at {REAL_MOBILE_DIR} (set SKPCD_REAL_MOBILE_DIR)")
+    return paths
+
+
 @pytest.fixture(scope="session")
 def dales(dales_dir):
     """All DALES objects as ``(clouds, labels, names)``."""

@@ -1,0 +1,168 @@
+"""Defaults chosen from the scan: the kind of each pattern, the ground that
+keeps object bases, the check of the automatic eps; on the real KITTI and
+PandaSet sweeps and on simulated scans."""
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from skpcd.datasets import make_street_scene
+from skpcd.exceptions import SegmentationWarning
+from skpcd.segmentation import (
+    SCAN_KINDS,
+    GroundFilter,
+    describe_scan,
+    segment_scene,
+)
+from skpcd.segmentation._ground import GROUND_PRESETS
+
+
+def read_sweep(path):
+    import laspy
+
+    f = laspy.read(path)
+    xyz = np.column_stack([f.x, f.y, f.z])
+    return xyz, np.asarray(f.semantic), np.asarray(f.instance)
+
+
+def test_every_real_sweep_is_a_spinning_scan(real_sweeps):
+    # measured: vertical 0.29-0.82, concentration 0.23-0.36
+    for path in real_sweeps:
+        scan = describe_scan(read_sweep(path)[0])
+        assert scan.kind == "spinning", (path.name, scan)
+        assert 0.005 < scan.spacing < 0.2
+
+
+@pytest.mark.parametrize(
+    ("scanner", "params", "sensor_up", "kind"),
+    [
+        ("aerial", None, None, "airborne"),
+        ("mobile", {"angular_step": 0.4, "rotation_rate": 100.0}, None, "profiler"),
+        ("spinning", {"sensor": "vlp16"}, None, "spinning"),
+        ("ugv", {"height": 0.6}, 0.6, "robot"),
+    ],
+)
+def test_each_simulated_pattern_is_told(scanner, params, sensor_up, kind):
+    s = make_street_scene(40.0, scanner=scanner, scanner_params=params, random_state=3)
+    sensor = None
+    if sensor_up is not None:
+        x, y = s.trajectory[0, :2]
+        sensor = (x, y, float(s.ground_height(x, y)) + sensor_up)
+    scan = describe_scan(s.points, sensor=sensor)
+    assert scan.kind == kind, scan
+    if sensor is not None:
+        assert scan.sensor_height == pytest.approx(sensor_up, abs=0.15)
+
+
+def test_a_flat_tile_and_aerial_scan_angles_are_airborne():
+    rng = np.random.default_rng(0)
+    tile = np.column_stack(
+        [rng.uniform(0, 300, (30000, 2)), rng.normal(0, 0.03, 30000)]
+    )
+    assert describe_scan(tile).kind == "airborne"
+    # walls everywhere, but the scan angles of an aircraft
+    wall = np.column_stack(
+        [
+            rng.uniform(0, 50, 20000),
+            np.repeat([0.0, 5.0], 10000),
+            rng.uniform(0, 8, 20000),
+        ]
+    )
+    assert describe_scan(wall).kind != "airborne"
+    angles = rng.uniform(-20, 20, len(wall))
+    scan = describe_scan(wall, scan_angle=angles)
+    assert (scan.kind, scan.reason) == ("airborne", "scan angles within 45 degrees")
+    # a rotating scanner's angles say nothing
+    assert describe_scan(wall, scan_angle=rng.uniform(-180, 180, len(wall))).kind != (
+        "airborne"
+    )
+
+
+def test_describe_scan_refuses_bad_input():
+    with pytest.raises(ValueError, match="at least 13 points"):
+        describe_scan(np.zeros((5, 3)))
+    with pytest.raises(ValueError, match="sensor must be"):
+        describe_scan(np.random.default_rng(0).random((100, 3)), sensor=(0, np.nan, 1))
+
+
+def test_auto_reports_the_kind_and_the_filter(real_sweeps):
+    xyz = read_sweep(real_sweeps[0])[0]
+    seg = segment_scene(xyz, n_jobs=2)
+    assert seg.scan.kind == "spinning"
+    assert seg.ground_filter == SCAN_KINDS["spinning"]["ground"] == "street"
+    assert seg.eps <= SCAN_KINDS["spinning"]["max_eps"]
+    fixed = segment_scene(xyz, ground="csf", n_jobs=2)
+    assert fixed.scan is None and fixed.ground_filter == "csf"
+
+
+def test_street_ground_gives_object_bases_back(real_sweeps):
+    # measured on this PandaSet sweep: 20 % of the car points ground with
+    # CSF alone, 11 % with the bases pass
+    path = next(p for p in real_sweeps if p.stem == "pandaset_000200")
+    xyz, sem, _ = read_sweep(path)
+    csf = GroundFilter(**GROUND_PRESETS["csf"]).fit_predict(xyz)
+    street = GroundFilter(**GROUND_PRESETS["street"]).fit_predict(xyz)
+    cars = sem == 10
+    assert not (street & ~csf).any()  # the pass only takes points away
+    assert street[cars].mean() < 0.7 * csf[cars].mean()
+    # and not the road: most of the unboxed ground points stay
+    assert street[sem == 0].sum() > 0.9 * csf[sem == 0].sum()
+
+
+def test_street_ground_on_a_simulated_street_keeps_the_ground():
+    s = make_street_scene(
+        40.0, scanner="spinning", scanner_params={"sensor": "vlp16"}, random_state=2
+    )
+    truth = s.labels == "ground"
+    csf = GroundFilter(**GROUND_PRESETS["csf"]).fit_predict(s.points)
+    street = GroundFilter(**GROUND_PRESETS["street"]).fit_predict(s.points)
+    assert street[truth].mean() > 0.97
+    objects = ~np.isin(s.labels, ["ground", "facade"])
+    assert street[objects].mean() <= csf[objects].mean()
+
+
+def sparse_tile(n=6000, side=300.0, seed=0):
+    """Points scattered over a wide tile a metre or two up: the automatic
+    radius follows their spacing and joins them all."""
+    rng = np.random.default_rng(seed)
+    return np.column_stack([rng.uniform(0, side, (n, 2)), rng.uniform(1, 3, n)])
+
+
+def test_an_automatic_eps_that_joins_the_tile_is_halved_with_a_warning():
+    xyz = sparse_tile()
+    with pytest.warns(SegmentationWarning, match=r"automatic eps .* \(--eps\)") as rec:
+        seg = segment_scene(xyz, ground=None, structures=False, min_cluster_size=5)
+    first = float(str(rec[0].message).split("automatic eps ")[1].split()[0])
+    assert seg.eps < first
+    from skpcd.segmentation._scene import _largest_box
+
+    _, area = _largest_box(xyz, seg.labels)
+    assert area <= 0.5 * 300.0**2
+    # a radius given is used as given, without a warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SegmentationWarning)
+        given = segment_scene(xyz, ground=None, structures=False, eps=first)
+    assert given.eps == first
+
+
+def test_cli_says_the_kind_and_writes_it(real_sweeps, tmp_path, capsys):
+    from skpcd.cli import main
+
+    out = tmp_path / "segments"
+    assert main(["segment", str(real_sweeps[0]), "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "spinning scan" in err and "ground 'street'" in err and "--ground" in err
+    meta = json.loads((out / "segmentation.json").read_text())
+    assert meta["scan"]["kind"] == "spinning"
+    assert meta["ground"] == "street"
+    assert meta["n_segments"] == len(list(out.glob("segment_*.ply")))
+    # overriding: no kind, the filter asked for
+    out2 = tmp_path / "csf"
+    assert (
+        main(["segment", str(real_sweeps[0]), "-o", str(out2), "--ground", "csf"]) == 0
+    )
+    assert "spinning scan" not in capsys.readouterr().err
+    meta = json.loads((out2 / "segmentation.json").read_text())
+    assert meta["scan"] is None and meta["ground"] == "csf"
