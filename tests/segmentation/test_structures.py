@@ -60,7 +60,8 @@ def _street(seed=0):
 @pytest.fixture(scope="module")
 def street():
     points, names = _street()
-    return points, names, segment_scene(points)
+    # the structures under CSF's ground (what they were measured with)
+    return points, names, segment_scene(points, ground="csf")
 
 
 def test_csf_ground_filter_separates_ground_and_repeats():
@@ -107,7 +108,12 @@ def test_csf_fills_the_empty_parts_of_the_bounding_box():
 def test_tiles_refuse_csf_and_structures():
     X = np.random.default_rng(0).random((100, 3))
     with pytest.raises(ValueError, match="cloth simulation"):
-        segment_scene(X, tile_size=10.0, structures=False)
+        segment_scene(X, ground="csf", tile_size=10.0, structures=False)
+    # ground="auto" takes SMRF tile by tile
+    assert segment_scene(X, tile_size=10.0, structures=False).ground_filter in (
+        "aerial",
+        "mobile",
+    )
     with pytest.raises(ValueError, match="structures=False"):
         segment_scene(X, ground="aerial", tile_size=10.0)
     with pytest.raises(ValueError, match="unknown structures"):
