@@ -7,8 +7,10 @@ facades, wires run from pole to pole through the crowns, a lamp post stands in a
 tree. Plain DBSCAN joins whatever touches. With its defaults,
 :func:`skpcd.segmentation.segment_scene` (and ``skpcd segment``, ``skpcd identify``)
 
-1. removes the ground with the cloth simulation filter (CSF,
-   :class:`~skpcd.segmentation.GroundFilter` with ``method="csf"``);
+1. tells what the scan is (here a car-mounted profiler scan) and removes the ground
+   with the cloth simulation filter followed by the pass that gives the bases of
+   objects back (``ground="auto"`` takes the ``"street"`` preset of
+   :class:`~skpcd.segmentation.GroundFilter`);
 2. takes the facades (large vertical planar surfaces) and the overhead wires (thin,
    long, high lines) out as segments of their own, typed ``"facade"`` and ``"wire"``;
 3. clusters the rest with DBSCAN (automatic eps) and splits the clusters that hold
