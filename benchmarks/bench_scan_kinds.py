@@ -23,6 +23,9 @@ Data (nothing here is shipped):
   semantic segmentation, nuScenes lidarseg): ground recall and precision
   against their ground classes, the share of car, vegetation, fence, pole,
   trunk and person points taken as ground.
+- ``dales``: scenes of real DALES objects on a synthetic terrain, as in
+  ``bench_ground.py`` (aerial-like and mobile-like samplings); exact
+  ground and objects.
 - ``simulated``: one street per pattern (:func:`make_street_scene`, 50 m,
   seed 1): profiler ("mobile", at a quarter density), spinning (HDL-64E),
   robot ("ugv" at 0.6 m), aerial; exact ground and objects.
@@ -56,6 +59,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+from bench_ground import dales_scenes_with_truth  # noqa: E402
 from bench_throughput import commit, machine  # noqa: E402
 
 SHARED = HERE.parent.parent / "shared" / "data"
@@ -242,7 +246,9 @@ def simulated():
 
 
 def run(methods):
-    results = {"real_mobile": {}, "aerial": {}, "kept_aside": {}, "simulated": {}}
+    results = {
+        "real_mobile": {}, "aerial": {}, "kept_aside": {}, "dales": {}, "simulated": {},
+    }  # fmt: skip
     for name, xyz, objects, classes in real_mobile():
         for m in methods:
             t = time.perf_counter()
@@ -296,6 +302,22 @@ def run(methods):
                 for m in methods
             },
         )
+    for kind, seed, xyz, cls, truth in dales_scenes_with_truth():
+        objects = [np.flatnonzero(truth == i) for i in np.unique(truth[truth >= 0])]
+        for m in methods:
+            labels, ground, eps, found = segment(m, xyz)
+            r = ground_score(ground, truth == -1)
+            r.update(objects_score(labels, objects))
+            r.update(kind=found, eps=eps)
+            results["dales"].setdefault(m, {})[f"{kind.split()[-1]}_{seed}"] = r
+        print(
+            kind,
+            seed,
+            {
+                m: round(results["dales"][m][f"{kind.split()[-1]}_{seed}"]["whole"], 2)
+                for m in methods
+            },
+        )
     for name, xyz, truth, objects in simulated():
         for m in methods:
             labels, ground, eps, kind = segment(m, xyz)
@@ -319,6 +341,14 @@ def mean_rows(per, keys):
     }
 
 
+def kinds_found(per):
+    """How many scenes of ``per`` were found of each kind."""
+    kinds = {}
+    for r in per.values():
+        kinds[r["kind"]] = kinds.get(r["kind"], 0) + 1
+    return kinds
+
+
 def write(results, out):
     lines = [
         "segment_scene defaults by kind of scan (benchmarks/bench_scan_kinds.py)",
@@ -340,9 +370,7 @@ def write(results, out):
     ]
     for m, per in results["real_mobile"].items():
         row = mean_rows(per, keys)
-        kinds = {}
-        for r in per.values():
-            kinds[r["kind"]] = kinds.get(r["kind"], 0) + 1
+        kinds = kinds_found(per)
         lines.append(
             f"{m:<22}"
             + "".join(f"{row[k]:>17.3f}" for k in keys)
@@ -356,9 +384,7 @@ def write(results, out):
     for m, per in results["aerial"].items():
         samples = {k: v for k, v in per.items() if k.startswith("samp")}
         row = mean_rows(samples, keys)
-        kinds = {}
-        for r in samples.values():
-            kinds[r["kind"]] = kinds.get(r["kind"], 0) + 1
+        kinds = kinds_found(samples)
         lines.append(
             f"{m:<22}"
             + "".join(f"{row[k]:>17.4f}" for k in keys)
@@ -395,6 +421,21 @@ def write(results, out):
                 + f"{','.join(kinds):>16}"
             )
     keys = ("ground_recall", "ground_precision", "kept", "whole", "purity")
+    lines += [
+        "",
+        "real DALES objects on a synthetic terrain (make_scene as in bench_ground.py; "
+        "aerial-like and mobile-like samplings, mean over seeds)",
+    ]
+    for m, per in results["dales"].items():
+        for sampling in ("aerial", "mobile"):
+            mine = {k: v for k, v in per.items() if k.startswith(sampling)}
+            row = mean_rows(mine, keys)
+            found = ", ".join(f"{k} {v}" for k, v in kinds_found(mine).items())
+            lines.append(
+                f"{sampling:<10}{m:<22}"
+                + "".join(f"{k} {row[k]:.3f}  " for k in keys)
+                + f"kinds {found}"
+            )
     lines += ["", "simulated streets, one per pattern (exact truth)"]
     for m, per in results["simulated"].items():
         for name, r in per.items():
