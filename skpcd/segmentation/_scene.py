@@ -27,6 +27,7 @@ from skpcd.segmentation._clusters import (
 )
 from skpcd.segmentation._dbscan import EPS_SCALE, AutoEpsDBSCAN
 from skpcd.segmentation._ground import GROUND_PRESETS, GroundFilter
+from skpcd.segmentation._scan_kind import sweep_coordinates
 from skpcd.utils._compile import entry_point
 
 __all__ = ["SceneSegmentation", "make_scene", "segment_scene"]
@@ -156,7 +157,14 @@ def segment_scene(
         a segment covering more than half of the scene's horizontal
         extent (and more than 50 x 50 m) is halved until none does, at
         least twice the point spacing, with a :class:`SegmentationWarning`
-        naming the radius used: give ``eps`` to choose it.
+        naming the radius used: give ``eps`` to choose it. With
+        ``ground="auto"`` on a single sweep (spinning, robot), the automatic
+        radius is at most ``SCAN_KINDS[kind]["max_eps"]`` (0.75 m; the
+        radius of the structures, returned as ``eps``) and DBSCAN clusters
+        with a radius of ``relative_eps`` (0.02) times the distance to the
+        sensor (in coordinates ``(log range, azimuth, height / range)`` around
+        ``scan.centre``):
+        a sweep is dense near the sensor and sparse far away.
     eps_scale : float, default=2.5
         With ``method="dbscan"`` and ``eps=None``, the estimated radius is
         this multiple of the knee distance of :class:`AutoEpsDBSCAN`
@@ -407,6 +415,7 @@ def segment_scene(
     is_ground = (
         np.zeros(len(xyz), dtype=bool) if filt is None else filt.fit_predict(xyz)
     )
+    sweep = None
     if scan is not None and eps is None and method == "dbscan":
         max_eps = SCAN_KINDS[scan.kind].get("max_eps")
         rest = xyz[~is_ground]
@@ -419,11 +428,19 @@ def segment_scene(
                 ),
                 max_eps,
             )
+            relative = SCAN_KINDS[scan.kind].get("relative_eps")
+            if relative is not None:
+                z0 = (
+                    np.median(xyz[is_ground, 2])
+                    if is_ground.any()
+                    else rest[:, 2].min()
+                )
+                sweep = (scan.centre, float(z0), relative)
     seg = _cluster_rest(
         xyz, is_ground, method=method, eps=eps, eps_scale=eps_scale,
         min_samples=min_samples, min_cluster_size=min_cluster_size,
         max_cluster_size=max_cluster_size, random_state=random_state,
-        n_jobs=n_jobs, structures=structures,
+        n_jobs=n_jobs, structures=structures, sweep=sweep,
     )  # fmt: skip
     seg = seg._replace(
         scan=scan, ground_filter=ground if isinstance(ground, str) else None
@@ -524,7 +541,7 @@ def _largest_box(xyz, labels):
 
 def _cluster_rest(
     xyz, is_ground, *, method, eps, eps_scale, min_samples, min_cluster_size,
-    max_cluster_size, random_state, n_jobs, structures,
+    max_cluster_size, random_state, n_jobs, structures, sweep=None,
 ):  # fmt: skip
     """The segments of the non-ground points, with the check of an
     automatic eps (see segment_scene)."""
@@ -538,7 +555,7 @@ def _cluster_rest(
         "min_cluster_size": min_cluster_size, "max_cluster_size": max_cluster_size,
         "random_state": random_state, "n_jobs": n_jobs, "structures": structures,
     }  # fmt: skip
-    seg = _segment_rest(xyz, is_ground, eps=eps, **kw)
+    seg = _segment_rest(xyz, is_ground, eps=eps, sweep=sweep, **kw)
     if eps is not None or method != "dbscan" or seg.n_segments == 0:
         return seg
     scene = np.ptp(xyz[:, :2], axis=0).prod() if len(xyz) else 0.0
@@ -569,10 +586,12 @@ def _cluster_rest(
 
 def _segment_rest(
     xyz, is_ground, *, method, eps, eps_scale, min_samples, min_cluster_size,
-    max_cluster_size, random_state, n_jobs, structures=False,
+    max_cluster_size, random_state, n_jobs, structures=False, sweep=None,
 ):  # fmt: skip
     """The segments of the non-ground points of checked xyz (see
-    segment_scene)."""
+    segment_scene). ``sweep``, ``(centre, z0, relative_eps)``: DBSCAN runs
+    in the coordinates of :func:`sweep_coordinates` with the radius
+    ``relative_eps`` (a radius proportional to the range)."""
     from skpcd.segmentation._dbscan import estimate_eps
 
     rest = np.flatnonzero(~is_ground)
@@ -592,12 +611,16 @@ def _segment_rest(
                 )
             )
 
+            space, radius = pts, used
+            if sweep is not None:
+                space, radius = sweep_coordinates(pts, sweep[0], sweep[1]), sweep[2]
+
             def cluster(mask):
                 if mask.sum() < 2:
                     return np.full(int(mask.sum()), -1, dtype=np.int64)
                 return (
-                    AutoEpsDBSCAN(eps=used, min_samples=min_samples, n_jobs=n_jobs)
-                    .fit(pts[mask])
+                    AutoEpsDBSCAN(eps=radius, min_samples=min_samples, n_jobs=n_jobs)
+                    .fit(space[mask])
                     .labels_
                 )
         else:
@@ -626,7 +649,14 @@ def _segment_rest(
         labels[rest] = kept[sub]
         kinds = kinds[kept[:-1] >= 0]
         return SceneSegmentation(labels, is_ground, float(used), _kind_names(kinds))
-    if method == "dbscan":
+    if method == "dbscan" and sweep is not None:
+        used = float(eps)
+        sub = (
+            AutoEpsDBSCAN(eps=sweep[2], min_samples=min_samples, n_jobs=n_jobs)
+            .fit(sweep_coordinates(xyz[rest], sweep[0], sweep[1]))
+            .labels_
+        )
+    elif method == "dbscan":
         est = AutoEpsDBSCAN(
             eps=eps,
             eps_scale=eps_scale,
