@@ -93,12 +93,9 @@ def csf_ground(
     Groups of points more than ``2 * _ISLAND_CELLS`` cloth cells (20 m at
     1 m) apart are filtered separately, each under its own cloth; a group
     of fewer than 10 points is ground. Empty parts of a group's bounding
-    box far from its points are filled (:func:`_far_fill`). When the
-    cloths would hold more particles than the scene has points (and more
-    than ``_MIN_PARTICLES``), the resolution is made coarser, to about one
-    particle per point: the cost follows the points, not the area.
+    box far from its points are filled (:func:`_far_fill`).
     """
-    from skpcd.segmentation._ground import _MAX_CELLS
+    from skpcd.segmentation._ground import _MAX_CELLS, _cell_indices, _islands
 
     _import_csf()
     ground = np.zeros(len(xyz), dtype=bool)
@@ -112,17 +109,17 @@ def csf_ground(
         "iterations": iterations,
         "time_step": time_step,
     }
-    rects, label, sizes = _cloth(xyz, float(cloth_resolution))
-    if sizes.sum() > max(len(xyz), _MIN_PARTICLES):
-        # sparser than the cloth: a coarser one, about a particle per point
-        coarser = float(cloth_resolution) * np.sqrt(sizes.sum() / len(xyz))
-        rects, label, sizes = _cloth(xyz, coarser)
-        kw["cloth_resolution"] = coarser
+    _, nx, ny, cells = _cell_indices(xyz, float(cloth_resolution))
+    if nx * ny <= max(len(xyz), 4 * _ISLAND_CELLS**2):
+        rects, label = np.array([[0, 0, nx - 1, ny - 1]]), None
+    else:
+        rects, label = _islands(cells, _ISLAND_CELLS)
+    del cells
+    sizes = (rects[:, 2:] - rects[:, :2] + 1).prod(axis=1)
     if sizes.sum() > _MAX_CELLS:
         raise ValueError(
             f"the occupied part of the scene needs {int(sizes.sum())} cloth "
-            f"particles of {kw['cloth_resolution']:.6g} (more than {_MAX_CELLS}); "
-            "use a "
+            f"particles of {cloth_resolution} (more than {_MAX_CELLS}); use a "
             "larger cell"
         )
     if label is None:
@@ -139,24 +136,6 @@ def csf_ground(
     return ground
 
 
-def _cloth(xyz, resolution):
-    """The cloths of a scene: the rectangles of cells ``(c0, r0, c1, r1)``
-    of its groups of points, the group of every point (None for one
-    group) and the particles of each cloth."""
-    from skpcd.segmentation._ground import _cell_indices, _islands
-
-    _, nx, ny, cells = _cell_indices(xyz, resolution)
-    if nx * ny <= max(len(xyz), 4 * _ISLAND_CELLS**2):
-        rects, label = np.array([[0, 0, nx - 1, ny - 1]]), None
-    else:
-        rects, label = _islands(cells, _ISLAND_CELLS)
-    return rects, label, (rects[:, 2:] - rects[:, :2] + 1).prod(axis=1)
-
-
-# Cloth particles allowed whatever the points; beyond, at most one per point
-# (the simulation's cost follows the particles: a sparse wide tile, 110 k
-# points over 1,177 x 563 units of 1, took 36 s with 660 k particles).
-_MIN_PARTICLES = 10_000
 # Groups of points more than twice this many cloth cells apart are filtered
 # on their own (each with its own cloth), so that the cloth covers the
 # occupied parts of the scene, not its bounding box (an outlier 100 km

@@ -422,10 +422,7 @@ class GroundFilter(BaseEstimator):
         ``scalar`` and ``low_noise``.
     cell : float, default=1.0
         Raster cell size (PDAL's ``cell``). Mobile scans: 0.5. With CSF,
-        the spacing of the cloth particles (CSF's ``cloth_resolution``),
-        made coarser where the cloth would hold more particles than the
-        scene has points (and more than 10,000): about one particle per
-        point, so that a sparse wide tile costs what its points do.
+        the spacing of the cloth particles (CSF's ``cloth_resolution``).
     slope : float, default=0.15
         Largest terrain slope (rise over run) kept as ground by the opening
         (PDAL's ``slope``).

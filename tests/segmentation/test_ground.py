@@ -328,32 +328,3 @@ def test_csf_ignores_n_jobs():
     two = GroundFilter(**GROUND_PRESETS["csf"], n_jobs=2).fit(X)
     np.testing.assert_array_equal(one.ground_, two.ground_)
     np.testing.assert_array_equal(one.dem_, two.dem_)
-
-
-def test_csf_cloth_follows_the_points_not_the_area(monkeypatch):
-    # a sparse wide tile: 20 k points over 1000 x 500 m would make 500 k
-    # particles of 1 m (measured on PDAL's autzen_trim in feet, 110 k points
-    # and 660 k particles: 36 s; with the coarser cloth 7.9 s)
-    from skpcd.segmentation import _csf
-
-    seen = []
-    real = _csf._csf_once
-
-    def spy(xyz, **kw):
-        seen.append(kw["cloth_resolution"])
-        return real(xyz, **kw)
-
-    monkeypatch.setattr(_csf, "_csf_once", spy)
-    rng = np.random.default_rng(0)
-    sparse = np.column_stack(
-        [rng.uniform(0, [1000, 500], (20000, 2)), rng.normal(0, 0.05, 20000)]
-    )
-    ground = GroundFilter(method="csf").fit_predict(sparse)
-    particles = np.prod(np.floor(np.ptp(sparse[:, :2], axis=0) / seen[-1]) + 1)
-    assert seen[-1] > 4.0 and particles <= 1.05 * len(sparse)
-    assert ground.mean() > 0.99  # a flat tile is ground
-    # a dense scene keeps the cloth asked for
-    seen.clear()
-    dense = sparse * [0.05, 0.05, 1.0]  # 50 x 25 m: 1,300 particles
-    GroundFilter(method="csf").fit(dense)
-    assert seen == [1.0]
