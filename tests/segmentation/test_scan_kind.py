@@ -225,3 +225,17 @@ def test_a_radius_proportional_to_the_range_keeps_close_objects_apart(
     monkeypatch.delitem(SCAN_KINDS["spinning"], "relative_eps")
     fixed = purity(segment_scene(xyz, n_jobs=2))
     assert relative > 0.5 > 0.2 > fixed
+
+
+def test_tiled_auto_tells_the_kind_from_the_file_and_takes_smrf(tmp_path):
+    pytest.importorskip("laspy")
+    from skpcd.io import read_point_cloud, write_point_cloud
+
+    s = make_street_scene(40.0, scanner="aerial", random_state=5)
+    path = tmp_path / "tile.las"
+    write_point_cloud(path, s.points)
+    tiled = segment_scene(path, tile_size=20.0, structures=False)
+    assert tiled.scan.kind == "airborne" and tiled.ground_filter == "aerial"
+    whole = segment_scene(read_point_cloud(path), ground="aerial", structures=False)
+    assert np.array_equal(np.asarray(tiled.labels), whole.labels)
+    assert np.array_equal(np.asarray(tiled.ground), whole.ground)
