@@ -349,6 +349,16 @@ def kinds_found(per):
     return kinds
 
 
+def summary_line(method, per, keys, fmt):
+    """One row of a table: the method, the mean of each key over the scenes
+    of ``per``, the kinds found."""
+    row = mean_rows(per, keys)
+    found = ", ".join(f"{k} {v}" for k, v in kinds_found(per).items())
+    return (
+        f"{method:<22}" + "".join(f"{row[k]:>17{fmt}}" for k in keys) + f"{found:>20}"
+    )
+
+
 def write(results, out):
     lines = [
         "segment_scene defaults by kind of scan (benchmarks/bench_scan_kinds.py)",
@@ -369,13 +379,7 @@ def write(results, out):
         f"{'method':<22}" + "".join(f"{k:>17}" for k in keys) + f"{'kinds found':>20}",
     ]
     for m, per in results["real_mobile"].items():
-        row = mean_rows(per, keys)
-        kinds = kinds_found(per)
-        lines.append(
-            f"{m:<22}"
-            + "".join(f"{row[k]:>17.3f}" for k in keys)
-            + f"{', '.join(f'{k} {v}' for k, v in kinds.items()):>20}"
-        )
+        lines.append(summary_line(m, per, keys, ".3f"))
     keys = ("ground_error", "ground_recall", "ground_precision")
     lines += ["", "real airborne: ISPRS filter test, 15 samples (mean)"]
     lines.append(
@@ -383,13 +387,7 @@ def write(results, out):
     )
     for m, per in results["aerial"].items():
         samples = {k: v for k, v in per.items() if k.startswith("samp")}
-        row = mean_rows(samples, keys)
-        kinds = kinds_found(samples)
-        lines.append(
-            f"{m:<22}"
-            + "".join(f"{row[k]:>17.4f}" for k in keys)
-            + f"{', '.join(f'{k} {v}' for k, v in kinds.items()):>20}"
-        )
+        lines.append(summary_line(m, samples, keys, ".4f"))
     for m, per in results["aerial"].items():
         if "autzen_trim" in per:
             a = per["autzen_trim"]
@@ -454,9 +452,10 @@ def main():
     p.add_argument("--methods", nargs="*", default=list(METHODS), choices=METHODS)
     p.add_argument("--out", type=Path, default=HERE / "results" / "scan_kinds.json")
     args = p.parse_args()
+    started = commit()  # the code measured, before any later commit
     results = run(args.methods)
     results.update(
-        date=time.strftime("%Y-%m-%dT%H:%M:%S"), commit=commit(), machine=machine()
+        date=time.strftime("%Y-%m-%dT%H:%M:%S"), commit=started, machine=machine()
     )
     write(results, args.out)
 
