@@ -9,7 +9,8 @@ One command for every kind of scan: airborne, profiler, spinning sensor, robot
 - points concentrated around one position, at most 500,000 of them: one sweep of a
   **spinning** sensor (a **robot** when a sensor position less than 1.2 m above the
   ground is given), ground by the cloth simulation filter with the bases of objects
-  given back, clusters with a radius of 2 % of the distance to the sensor;
+  given back, clusters with a radius proportional to the distance to the sensor
+  (estimated from the sweep: it bridges the sensor's rings);
 - otherwise a car-mounted **profiler** scan, the same ground filter.
 
 The same street is simulated here with the four patterns

@@ -15,7 +15,12 @@ memory.
 from skpcd.segmentation._clusters import EuclideanClusters, euclidean_clusters
 from skpcd.segmentation._dbscan import AutoEpsDBSCAN, estimate_eps, plot_eps_curve
 from skpcd.segmentation._ground import GROUND_PRESETS, GroundFilter
-from skpcd.segmentation._scan_kind import SCAN_KINDS, ScanKind, describe_scan
+from skpcd.segmentation._scan_kind import (
+    SCAN_KINDS,
+    ScanKind,
+    describe_scan,
+    sweep_coordinates,
+)
 from skpcd.segmentation._scene import SceneSegmentation, make_scene, segment_scene
 from skpcd.segmentation._structures import STRUCTURE_DEFAULTS
 from skpcd.segmentation._tiling import TiledScene, TileGrid, tile_scene
@@ -37,5 +42,6 @@ __all__ = [
     "make_scene",
     "plot_eps_curve",
     "segment_scene",
+    "sweep_coordinates",
     "tile_scene",
 ]

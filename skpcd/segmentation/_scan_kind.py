@@ -14,8 +14,9 @@ __all__ = ["SCAN_KINDS", "ScanKind", "describe_scan", "sweep_coordinates"]
 # The kinds and the defaults of segment_scene with ground="auto" for each:
 # the ground preset (a key of GROUND_PRESETS), the largest automatic
 # radius (max_eps, metres, that of the structures) and, for single sweeps,
-# the clustering radius as a fraction of the range (relative_eps, DBSCAN
-# in sweep_coordinates). Chosen on real scans
+# the clustering radius in sweep_coordinates, where a radius is a distance
+# proportional to the range, as a multiple of the knee distance estimated
+# there (relative_eps_scale). Chosen on real scans
 # (benchmarks/bench_scan_kinds.py, table in the user guide): SMRF with the
 # aerial preset on airborne tiles (CSF loses steep and forested terrain
 # there); CSF followed by the pass that gives object bases back on the
@@ -23,19 +24,19 @@ __all__ = ["SCAN_KINDS", "ScanKind", "describe_scan", "sweep_coordinates"]
 # sparse far away, and its automatic radius follows the far points (0.3
 # to 2 m on the 12 real sweeps of ../shared/data/real_mobile): capped at
 # 0.75 m, with the bases pass, 0.63 of the boxed objects are whole (mean
-# over the sweeps) against 0.57 with the previous defaults, and the
-# segments are purer (0.67 against 0.57). A radius proportional to the
-# range does better still: relative_eps chosen among 0.015, 0.02, 0.025,
-# 0.03 and 0.04 by leaving one sweep out (every fold chose 0.02; held-out
-# mean of whole and purity 0.697 against 0.653 with the capped radius).
-# All 12 sweeps are of 64-beam sensors: on a 16-beam sweep, whose rings
-# are 2 degrees apart, 0.02 breaks objects into rings (simulated VLP-16
-# robot sweep: 0.26 of the objects kept, benchmarks/results/scan_kinds.txt).
+# over the sweeps) against 0.57 with the previous defaults. A radius
+# proportional to the range does better: on those sweeps (all 64-beam),
+# 1.4 times the knee distance in sweep coordinates (1.0 to 2.0 tried) gives
+# the best mean of whole and purity, 0.698 (0.663 whole, 0.733 pure), and
+# about 2 % of the range. Estimated rather than fixed, the radius follows
+# the rings of the sensor: on simulated 16-beam robot sweeps, whose rings
+# are 2 degrees apart, it bridges them (0.71 of the objects kept against
+# 0.26 with a fixed 2 %; benchmarks/results/scan_kinds.txt).
 SCAN_KINDS = {
     "airborne": {"ground": "aerial"},
     "profiler": {"ground": "street"},
-    "spinning": {"ground": "street", "max_eps": 0.75, "relative_eps": 0.02},
-    "robot": {"ground": "street", "max_eps": 0.75, "relative_eps": 0.02},
+    "spinning": {"ground": "street", "max_eps": 0.75, "relative_eps_scale": 1.4},
+    "robot": {"ground": "street", "max_eps": 0.75, "relative_eps_scale": 1.4},
 }
 
 # Points drawn for the measurements (the spacing, the shape of the

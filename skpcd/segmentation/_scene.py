@@ -161,10 +161,14 @@ def segment_scene(
         ``ground="auto"`` on a single sweep (spinning, robot), the automatic
         radius is at most ``SCAN_KINDS[kind]["max_eps"]`` (0.75 m; the
         radius of the structures, returned as ``eps``) and DBSCAN clusters
-        with a radius of ``relative_eps`` (0.02) times the distance to the
-        sensor (in coordinates ``(log range, azimuth, height / range)`` around
-        ``scan.centre``):
-        a sweep is dense near the sensor and sparse far away.
+        in coordinates ``(log range, azimuth, height / range)`` around
+        ``scan.centre`` (:func:`sweep_coordinates`), where one radius is a
+        distance proportional to the range: a sweep is dense near the
+        sensor and sparse far away. That radius is estimated in those
+        coordinates, ``SCAN_KINDS[kind]["relative_eps_scale"]`` (1.4) times
+        the knee distance, so that it bridges the rings of the sensor
+        (about 2 % of the range for a 64-beam sensor, 5 % for a 16-beam
+        one).
     eps_scale : float, default=2.5
         With ``method="dbscan"`` and ``eps=None``, the estimated radius is
         this multiple of the knee distance of :class:`AutoEpsDBSCAN`
@@ -428,14 +432,20 @@ def segment_scene(
                 ),
                 max_eps,
             )
-            relative = SCAN_KINDS[scan.kind].get("relative_eps")
-            if relative is not None:
-                z0 = (
+            scale = SCAN_KINDS[scan.kind].get("relative_eps_scale")
+            if scale is not None:
+                z0 = float(
                     np.median(xyz[is_ground, 2])
                     if is_ground.any()
                     else rest[:, 2].min()
                 )
-                sweep = (scan.centre, float(z0), relative)
+                relative = estimate_eps(
+                    sweep_coordinates(rest, scan.centre, z0),
+                    eps_scale=scale,
+                    random_state=random_state,
+                    n_jobs=n_jobs,
+                )
+                sweep = (scan.centre, z0, relative)
     seg = _cluster_rest(
         xyz, is_ground, method=method, eps=eps, eps_scale=eps_scale,
         min_samples=min_samples, min_cluster_size=min_cluster_size,
@@ -589,9 +599,9 @@ def _segment_rest(
     max_cluster_size, random_state, n_jobs, structures=False, sweep=None,
 ):  # fmt: skip
     """The segments of the non-ground points of checked xyz (see
-    segment_scene). ``sweep``, ``(centre, z0, relative_eps)``: DBSCAN runs
-    in the coordinates of :func:`sweep_coordinates` with the radius
-    ``relative_eps`` (a radius proportional to the range)."""
+    segment_scene). ``sweep``, ``(centre, z0, radius)``: DBSCAN runs in the
+    coordinates of :func:`sweep_coordinates` with that radius (a distance
+    proportional to the range)."""
     from skpcd.segmentation._dbscan import estimate_eps
 
     rest = np.flatnonzero(~is_ground)

@@ -208,7 +208,8 @@ def test_a_radius_proportional_to_the_range_keeps_close_objects_apart(
     real_sweeps, monkeypatch
 ):
     # measured on this KITTI sweep: with one radius (0.34 m, capped at 0.75)
-    # the boxed car's segment is 4 % car; with 2 % of the range, 70 %
+    # the boxed car's segment is 4 % car; with a radius proportional to the
+    # range (about 2 % of it here), 70 %
     path = next(p for p in real_sweeps if p.stem == "kitti_object_000002")
     xyz, _, inst = read_sweep(path)
 
@@ -222,9 +223,28 @@ def test_a_radius_proportional_to_the_range_keeps_close_objects_apart(
         return np.mean(out)
 
     relative = purity(segment_scene(xyz, n_jobs=2))
-    monkeypatch.delitem(SCAN_KINDS["spinning"], "relative_eps")
+    monkeypatch.delitem(SCAN_KINDS["spinning"], "relative_eps_scale")
     fixed = purity(segment_scene(xyz, n_jobs=2))
     assert relative > 0.5 > 0.2 > fixed
+
+
+def test_the_relative_radius_bridges_the_rings_of_a_16_beam_robot():
+    # a VLP-16 0.6 m up: rings 2 degrees apart. A fixed 2 % of the range
+    # kept 0.26 of the objects (9 of 35) in rings; the radius estimated in
+    # sweep coordinates grows with the rings: 0.71 kept, 0.54 whole.
+    s = make_street_scene(
+        50.0, scanner="ugv", scanner_params={"height": 0.6}, random_state=1, n_jobs=2
+    )
+    cls = s.labels.astype(str)
+    objects = [
+        idx
+        for i in np.unique(s.instances[~np.isin(cls, ["ground", "facade", "wire"])])
+        if len(idx := np.flatnonzero(s.instances == i)) >= 20
+    ]
+    seg = segment_scene(s.points, min_cluster_size=50, n_jobs=2)
+    assert seg.scan.kind == "spinning"
+    kept = [(seg.labels[idx] >= 0).mean() >= 0.5 for idx in objects]
+    assert len(objects) > 20 and np.mean(kept) > 0.6
 
 
 def test_tiled_auto_tells_the_kind_from_the_file_and_takes_smrf(tmp_path):
