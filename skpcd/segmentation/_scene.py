@@ -167,8 +167,8 @@ def segment_scene(
         sensor and sparse far away. That radius is estimated in those
         coordinates, ``SCAN_KINDS[kind]["relative_eps_scale"]`` (1.4) times
         the knee distance, so that it bridges the rings of the sensor
-        (about 2 % of the range for a 64-beam sensor, 5 % for a 16-beam
-        one).
+        (2 to 3 % of the range on real 64-beam sweeps, about twice that on
+        simulated 16-beam ones).
     eps_scale : float, default=2.5
         With ``method="dbscan"`` and ``eps=None``, the estimated radius is
         this multiple of the knee distance of :class:`AutoEpsDBSCAN`
