@@ -74,3 +74,65 @@ def labelled_objects(request):
     (skipped without the folder)."""
     name = "urban_objects" if request.param == "synthetic" else "dales"
     return request.getfixturevalue(name)
+
+
+# -- descriptors of a few labelled objects (encoding, classification) --------
+
+
+def _with_a_wire(cloud):
+    """The cloud and, 10 m beyond it, 7 collinear points (a wire).
+
+    Their 6-neighbourhoods are rank 1, so their normals and PFH are
+    undefined (NaN), as for real isolated wires or scan lines.
+    """
+    wire = cloud.max(axis=0) + 10.0 + np.arange(7)[:, None] * [0.3, 0.0, 0.0]
+    return np.vstack([cloud, wire])
+
+
+@pytest.fixture(scope="module")
+def dales_small(labelled_objects):
+    """8 objects per class (at most 4000 points), in order: synthetic, then
+    real DALES ones.
+
+    Every fifth object carries a wire of undefined descriptors.
+    """
+    all_clouds, all_labels, _ = labelled_objects
+    clouds, labels, taken = [], [], {}
+    for cloud, label in zip(all_clouds, all_labels, strict=True):
+        if taken.get(label, 0) < 8 and len(cloud) <= 4000:
+            clouds.append(cloud)
+            labels.append(label)
+            taken[label] = taken.get(label, 0) + 1
+    clouds = [_with_a_wire(c) if i % 5 == 0 else c for i, c in enumerate(clouds)]
+    return clouds, np.array(labels)
+
+
+@pytest.fixture(scope="module")
+def dales_pfh(dales_small):
+    """The paper's PFH (k = 6, 125 bins) of the small DALES objects."""
+    clouds, labels = dales_small
+    from skpcd.features import PFHTransformer
+
+    return PFHTransformer(n_neighbors=6, n_jobs=2).transform(clouds), labels
+
+
+def _subsample(clouds, n_points=300, seed=0):
+    rng = np.random.default_rng(seed)
+    return [
+        c if len(c) <= n_points else c[rng.choice(len(c), n_points, replace=False)]
+        for c in clouds
+    ]
+
+
+@pytest.fixture(scope="module")
+def dales_cases(labelled_objects):
+    """Volume and improved PFH of up to 40 objects per class (at most 300
+    points each, to keep the test fast): 20 synthetic ones, then 40 DALES
+    ones."""
+    from skpcd.classification import make_case_based_pipeline
+
+    clouds, labels, _ = labelled_objects
+    keep = np.concatenate([np.flatnonzero(labels == c)[:40] for c in np.unique(labels)])
+    clouds = _subsample([clouds[i] for i in keep])
+    X = make_case_based_pipeline()[0].fit_transform(clouds)
+    return X, labels[keep], clouds

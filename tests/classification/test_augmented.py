@@ -11,10 +11,6 @@ from sklearn.tree import DecisionTreeClassifier
 from skpcd.classification import SimulationAugmented, make_street_pipeline
 from skpcd.datasets import make_street_objects
 
-# the tests that simulate and describe clouds share one worker, which compiles
-# the simulator's and the descriptors' kernels once for them
-SIMULATING = pytest.mark.xdist_group("street_simulation")
-
 
 def _small_pipeline():
     return make_street_pipeline().set_params(classifier__estimator__n_estimators=20)
@@ -33,7 +29,6 @@ def real():
     return [*clouds, *kiosks], np.array([*labels, "kiosk", "kiosk"])
 
 
-@SIMULATING
 def test_adds_simulated_objects_of_the_known_classes(real):
     X, y = real
     model = SimulationAugmented(
@@ -49,7 +44,6 @@ def test_adds_simulated_objects_of_the_known_classes(real):
     assert forest.n_features_in_ > 0 and len(forest.estimators_) == 20
 
 
-@SIMULATING
 def test_auto_keeps_the_pattern_that_labels_the_real_objects_best(real):
     X, y = real
     model = SimulationAugmented(_small_pipeline(), n_per_class=3, random_state=0)
@@ -66,7 +60,6 @@ class _WeightSpy(DecisionTreeClassifier):
         return super().fit(X, y, sample_weight=sample_weight)
 
 
-@SIMULATING
 def test_real_objects_weigh_real_weight_times_a_simulated_one(real):
     X, y = real
     pipe = _small_pipeline()

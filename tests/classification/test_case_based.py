@@ -7,7 +7,6 @@ import sklearn
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.testing import assert_allclose, assert_array_equal
-from sklearn.base import clone
 from sklearn.calibration import CalibratedClassifierCV
 from sklearn.model_selection import GridSearchCV, StratifiedKFold
 
@@ -224,26 +223,6 @@ def test_calibrated_probabilities():
     assert_allclose(proba.sum(axis=1), 1)
 
 
-def _subsample(clouds, n_points=300, seed=0):
-    rng = np.random.default_rng(seed)
-    return [
-        c if len(c) <= n_points else c[rng.choice(len(c), n_points, replace=False)]
-        for c in clouds
-    ]
-
-
-@pytest.fixture(scope="module")
-def dales_cases(labelled_objects):
-    """Volume and improved PFH of up to 40 objects per class (at most 300
-    points each, to keep the test fast): 20 synthetic ones, then 40 DALES
-    ones."""
-    clouds, labels, _ = labelled_objects
-    keep = np.concatenate([np.flatnonzero(labels == c)[:40] for c in np.unique(labels)])
-    clouds = _subsample([clouds[i] for i in keep])
-    X = make_case_based_pipeline()[0].fit_transform(clouds)
-    return X, labels[keep], clouds
-
-
 def test_pipeline_layout(dales_cases):
     X, _, clouds = dales_cases
     assert_allclose(X[:, 0], OverallDescriptor().fit_transform(clouds)[:, 9])
@@ -253,55 +232,6 @@ def test_pipeline_layout(dales_cases):
     assert plain[-1].volume_column is None
     with pytest.raises(TypeError, match="volume_column"):
         make_case_based_pipeline(volume_column=1)
-
-
-# The approximate tests run on DALES only, and are slow: each approximate
-# fit, and the first query after unpickling, costs about 6 s whatever the
-# number of cases (40 s for the first in a process), too much for a
-# synthetic variant.
-@pytest.mark.xdist_group("pynndescent")  # its JIT compiled once
-@pytest.mark.slow
-@pytest.mark.parametrize("labelled_objects", ["dales"], indirect=True)
-def test_approximate_recall_on_dales(dales_cases):
-    X, labels, _ = dales_cases
-    train = np.arange(len(X)) % 4 != 0
-    params = {"volume_column": 0, "w1": 0.3, "threshold": None}
-    exact = CaseBasedClassifier(**params).fit(X[train], labels[train])
-    approx = CaseBasedClassifier(
-        **params, algorithm="approximate", n_candidates=5, random_state=0
-    ).fit(X[train], labels[train])
-    assert approx.algorithm_ == "approximate"
-    assert all(index is not None for *_, index in approx._indexes)
-    Q = X[~train]
-    s_exact, i_exact = exact.retrieve(Q, n_cases=5)
-    s_approx, i_approx = approx.retrieve(Q, n_cases=5)
-    top1 = (i_exact[:, 0] == i_approx[:, 0]).mean()
-    top5 = np.mean([len(set(a) & set(b)) / 5 for a, b in zip(i_exact, i_approx)])
-    assert top1 >= 0.95
-    assert top5 >= 0.9
-    # candidates are cases: never more similar than the exact best
-    assert (s_approx <= s_exact + 1e-12).all()
-    cs_exact, cs_approx = exact.class_similarity(Q), approx.class_similarity(Q)
-    assert (cs_approx <= cs_exact + 1e-12).all()
-    assert (approx.predict(Q) == exact.predict(Q)).mean() >= 0.95
-    # pickle and clone round trips
-    again = pickle.loads(pickle.dumps(approx))
-    assert_array_equal(again.retrieve(Q, n_cases=5)[1], i_approx)
-    refit = clone(approx).fit(X[train], labels[train])
-    assert_array_equal(refit.retrieve(Q, n_cases=5)[1], i_approx)
-
-
-@pytest.mark.xdist_group("pynndescent")  # its JIT compiled once
-@pytest.mark.slow
-@pytest.mark.parametrize("labelled_objects", ["dales"], indirect=True)
-def test_auto_switch(dales_cases, monkeypatch):
-    from skpcd.classification import _case_based
-
-    X, labels, _ = dales_cases
-    assert CaseBasedClassifier().fit(X, labels).algorithm_ == "exact"
-    monkeypatch.setattr(_case_based, "AUTO_APPROXIMATE", 100)
-    model = CaseBasedClassifier(n_candidates=5).fit(X, labels)
-    assert model.algorithm_ == "approximate"
 
 
 def test_grid_search_on_dales_clouds(dales_cases):

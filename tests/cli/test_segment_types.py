@@ -4,12 +4,9 @@ and folders written before the type column still read."""
 import csv
 
 import numpy as np
-import pytest
 
 from skpcd.cli import main
 from skpcd.io import read_segments, write_point_cloud
-
-pytest.importorskip("CSF")
 
 
 def _scene(path):

@@ -1,4 +1,3 @@
-import pickle
 import warnings
 
 import numpy as np
@@ -45,51 +44,14 @@ def blobs(n_clouds=6, seed=0, n_features=4):
     return out, centres
 
 
-def _with_a_wire(cloud):
-    """The cloud and, 10 m beyond it, 7 collinear points (a wire).
-
-    Their 6-neighbourhoods are rank 1, so their normals and PFH are
-    undefined (NaN), as for real isolated wires or scan lines.
-    """
-    wire = cloud.max(axis=0) + 10.0 + np.arange(7)[:, None] * [0.3, 0.0, 0.0]
-    return np.vstack([cloud, wire])
-
-
-@pytest.fixture(scope="module")
-def dales_small(labelled_objects):
-    """8 objects per class (at most 4000 points), in order: synthetic, then
-    real DALES ones.
-
-    Every fifth object carries a wire of undefined descriptors.
-    """
-    all_clouds, all_labels, _ = labelled_objects
-    clouds, labels, taken = [], [], {}
-    for cloud, label in zip(all_clouds, all_labels, strict=True):
-        if taken.get(label, 0) < 8 and len(cloud) <= 4000:
-            clouds.append(cloud)
-            labels.append(label)
-            taken[label] = taken.get(label, 0) + 1
-    clouds = [_with_a_wire(c) if i % 5 == 0 else c for i, c in enumerate(clouds)]
-    return clouds, np.array(labels)
-
-
-@pytest.fixture(scope="module")
-def dales_pfh(dales_small):
-    """The paper's PFH (k = 6, 125 bins) of the small DALES objects."""
-    clouds, labels = dales_small
-    return PFHTransformer(n_neighbors=6, n_jobs=2).transform(clouds), labels
-
-
 # -- sklearn conventions (the data-free checks are in tests/test_common.py) ----
 
 
-@pytest.mark.xdist_group("pynndescent")  # its JIT compiled once
 @pytest.mark.parametrize(
     "params",
     [
         {"n_words": 5},
         {"n_words": 5, "norm": "l2", "use_idf": True, "max_descriptors": 300},
-        {"n_words": 20, "assignment": "approximate"},
     ],
 )
 def test_ragged_checks_on_real_descriptors(dales_pfh, params):
@@ -296,69 +258,6 @@ def test_clusterer_is_a_cloned_sub_estimator(dales_pfh):
 
 
 # -- approximate assignment ---------------------------------------------------
-
-
-def _one_hot_words(bof, descs):
-    """The word of each descriptor, through transform of one-row clouds."""
-    return bof.transform([row[None] for row in descs]).argmax(axis=1)
-
-
-# real PFH only: on the synthetic objects' PFH (many repeated descriptors)
-# MiniBatchKMeans leaves repeated words (289 distinct of 300), so 12 % of the
-# queries get another word at the same distance (97 % of the differences are
-# such ties) and the counts split between the copies
-@pytest.mark.xdist_group("pynndescent")  # its JIT compiled once
-@pytest.mark.slow
-@pytest.mark.parametrize("labelled_objects", ["dales"], indirect=True)
-def test_approximate_assignment_agrees_with_exact_on_real_pfh(dales_pfh):
-    pfh, _ = dales_pfh
-    rows = np.vstack(pfh)
-    rows = rows[~np.isnan(rows).any(axis=1)]
-    queries = rows[np.random.default_rng(0).choice(len(rows), 3000, replace=False)]
-    params = {"n_words": 300, "norm": None, "random_state": 0, "max_descriptors": 6000}
-    params["clusterer"] = MiniBatchKMeans(batch_size=1024, n_init=1, max_iter=20)
-    exact = BagOfFeatures(assignment="exact", **params).fit(pfh)
-    approx = BagOfFeatures(assignment="approximate", **params).fit(pfh)
-    assert (exact.assignment_, approx.assignment_) == ("exact", "approximate")
-    np.testing.assert_array_equal(exact.vocabulary_, approx.vocabulary_)
-    want, got = _one_hot_words(exact, queries), _one_hot_words(approx, queries)
-    agreement = np.mean(want == got)
-    assert agreement >= 0.98, agreement
-    # where they differ, the approximate word is nearly as close
-    v = exact.vocabulary_.astype(np.float64)
-    d_exact = np.linalg.norm(queries - v[want], axis=1)
-    d_approx = np.linalg.norm(queries - v[got], axis=1)
-    assert (d_approx >= d_exact - 1e-3).all()
-    assert d_approx.sum() <= 1.01 * d_exact.sum()
-    # and the counts of whole clouds barely move
-    a, e = approx.transform(pfh), exact.transform(pfh)
-    assert np.minimum(a, e).sum() / e.sum() >= 0.98
-
-
-@pytest.mark.xdist_group("pynndescent")  # its JIT compiled once
-def test_auto_assignment_threshold(monkeypatch):
-    # the documented threshold, then the rule at a small threshold (fitting
-    # 2047 words to check it took 114 s)
-    assert BagOfFeatures._APPROXIMATE_MIN_WORDS == 2048
-    monkeypatch.setattr(BagOfFeatures, "_APPROXIMATE_MIN_WORDS", 16)
-    rng = np.random.default_rng(0)
-    X = [rng.normal(size=(300, 3)), rng.normal(size=(100, 3))]
-    quick = KMeans(n_init=1, max_iter=1, init="random")
-    for n_words, want in [(15, "exact"), (16, "approximate")]:
-        bof = BagOfFeatures(n_words, clusterer=quick, random_state=0).fit(X)
-        assert bof.assignment_ == want
-    assert hasattr(bof, "_index")
-    exact = bof.set_params(assignment="exact").fit(X)
-    assert exact.assignment_ == "exact" and not hasattr(exact, "_index")
-
-
-@pytest.mark.xdist_group("pynndescent")  # its JIT compiled once
-def test_pickled_approximate_encoder_gives_same_output(dales_pfh):
-    pfh, _ = dales_pfh
-    bof = BagOfFeatures(n_words=50, assignment="approximate", random_state=0)
-    bof.fit(pfh[:10])
-    again = pickle.loads(pickle.dumps(bof))
-    np.testing.assert_array_equal(again.transform(pfh), bof.transform(pfh))
 
 
 # -- in a pipeline, on real clouds ----------------------------------------------

@@ -3,7 +3,6 @@ import hashlib
 import importlib
 import json
 import os
-import pickle
 import re
 import subprocess
 import sys
@@ -540,35 +539,3 @@ def test_crafted_trees_are_refused_before_predict(tmp_path):
         tmp_path,
     )
     assert out.count("refused") == 5, out
-
-
-@pytest.mark.xdist_group("pynndescent")  # its JIT compiled once
-@pytest.mark.parametrize("which", ["bag", "cases"])
-def test_approximate_indexes_are_saved_and_rebuilt(tmp_path, which):
-    # before: skops could not store the pynndescent indexes (TypeError:
-    # cannot pickle 'generator' object)
-    from skpcd.classification import CaseBasedClassifier
-    from skpcd.encoding import BagOfFeatures
-
-    rng = np.random.default_rng(0)
-    if which == "bag":
-        X = [rng.normal(size=(200, 4)) for _ in range(6)]
-        model = BagOfFeatures(
-            40, assignment="approximate", random_state=0, n_jobs=1
-        ).fit(X)
-        query, answer = X, model.transform
-    else:
-        X = np.abs(rng.normal(size=(120, 9)))
-        y = np.repeat(["a", "b"], 60)
-        model = CaseBasedClassifier(
-            algorithm="approximate", n_candidates=10, n_jobs=1, random_state=0
-        ).fit(X, y)
-        query, answer = X, model.decision_function
-    want = answer(query)
-    save_model(model, tmp_path / "m.skpcd")
-    again = load_model(tmp_path / "m.skpcd")
-    fresh = pickle.loads(pickle.dumps(model))
-    for other in (again, fresh):
-        method = getattr(other, answer.__name__)
-        np.testing.assert_array_equal(method(query), want)
-    np.testing.assert_array_equal(answer(query), want)  # the original still works

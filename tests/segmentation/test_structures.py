@@ -9,8 +9,6 @@ import pytest
 from skpcd.segmentation import GroundFilter, segment_scene
 from skpcd.segmentation._structure_kernels import local_shape
 
-pytest.importorskip("CSF")
-
 
 def _street(seed=0):
     """A small street: ground, a facade (30 x 8 m), a tree against it with
