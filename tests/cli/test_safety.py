@@ -182,8 +182,13 @@ def test_ctrl_c_in_a_real_process_is_one_line(tmp_path, scene_file):
         sys.exit(main({_segment_args(scene, out, "--eps", "1.0", "--quiet")!r}))
         """
     )
+    # as from a terminal: SIGINT at its default (a pytest-xdist worker ignores
+    # it, and a child started from there would inherit that and run on)
     proc = subprocess.Popen(
-        [sys.executable, "-c", script], stderr=subprocess.PIPE, text=True
+        [sys.executable, "-c", script],
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     deadline = time.monotonic() + 120
     while not _leftovers(tmp_path) and time.monotonic() < deadline:
