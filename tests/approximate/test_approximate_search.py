@@ -5,6 +5,8 @@ pynndescent compiles its index for minutes on a cold numba cache and for
 about a minute on a warm one, once per process. The suite runs with
 ``--dist loadfile``, so that one worker pays it, for every test here; the
 folder's name puts the module first, so that it does not end the run alone.
+All are marked slow: the README's test command leaves them out, CI runs them
+in a second step (``-m slow``).
 """
 
 import pickle
@@ -19,6 +21,8 @@ from skpcd.classification import CaseBasedClassifier
 from skpcd.encoding import BagOfFeatures
 from skpcd.io import load_model, save_model
 from skpcd.utils.estimator_checks import check_ragged_estimator
+
+pytestmark = pytest.mark.slow
 
 
 def test_ragged_checks_of_the_approximate_assignment(dales_pfh):
@@ -38,7 +42,6 @@ def _one_hot_words(bof, descs):
 # MiniBatchKMeans leaves repeated words (289 distinct of 300), so 12 % of the
 # queries get another word at the same distance (97 % of the differences are
 # such ties) and the counts split between the copies
-@pytest.mark.slow
 @pytest.mark.parametrize("labelled_objects", ["dales"], indirect=True)
 def test_approximate_assignment_agrees_with_exact_on_real_pfh(dales_pfh):
     pfh, _ = dales_pfh
@@ -93,7 +96,6 @@ def test_pickled_approximate_encoder_gives_same_output(dales_pfh):
 # fit, and the first query after unpickling, costs about 6 s whatever the
 # number of cases (40 s for the first in a process), too much for a
 # synthetic variant.
-@pytest.mark.slow
 @pytest.mark.parametrize("labelled_objects", ["dales"], indirect=True)
 def test_approximate_recall_on_dales(dales_cases):
     X, labels, _ = dales_cases
@@ -124,7 +126,6 @@ def test_approximate_recall_on_dales(dales_cases):
     assert_array_equal(refit.retrieve(Q, n_cases=5)[1], i_approx)
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("labelled_objects", ["dales"], indirect=True)
 def test_auto_switch(dales_cases, monkeypatch):
     from skpcd.classification import _case_based
