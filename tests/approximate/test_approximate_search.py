@@ -92,10 +92,7 @@ def test_pickled_approximate_encoder_gives_same_output(dales_pfh):
     np.testing.assert_array_equal(again.transform(pfh), bof.transform(pfh))
 
 
-# The approximate tests run on DALES only, and are slow: each approximate
-# fit, and the first query after unpickling, costs about 6 s whatever the
-# number of cases (40 s for the first in a process), too much for a
-# synthetic variant.
+# The case-based approximate tests run on DALES only.
 @pytest.mark.parametrize("labelled_objects", ["dales"], indirect=True)
 def test_approximate_recall_on_dales(dales_cases):
     X, labels, _ = dales_cases
