@@ -320,10 +320,11 @@ class CaseBasedClassifier(ClassifierMixin, BaseEstimator):
     queries (memory bounded by scikit-learn's ``working_memory``). The
     approximate one builds, per class, a pynndescent index under the plain
     correlation of the histograms (a Euclidean index over the histograms
-    centred and scaled to unit length: the same order), takes ``n_candidates`` neighbours from
-    it and, with a volume column, the ``n_candidates`` cases of nearest
-    volume, and re-ranks them exactly. On 8000 DALES cases the exact top
-    case was found for 99% of the queries.
+    centred and scaled to unit length: the same order), takes
+    ``n_candidates`` neighbours from it and, with a volume column, the
+    ``n_candidates`` cases of nearest volume, and re-ranks them exactly.
+    On 8000 DALES cases the exact top case was found for 99% of the
+    queries.
 
     References
     ----------
