@@ -695,15 +695,27 @@ def _pool(block, how):
     return valid.max(axis=0)
 
 
-_COMMON_PARAMS = """
+class PFHTransformer(_LocalDescriptor):
+    """Point Feature Histogram of every point, bin for bin as PCL.
+
+    For every pair of points in a point's neighbourhood (the point
+    included), three angles between their normals and the line joining them
+    are binned into ``n_bins ** 3`` bins, f1 varying fastest; each pair adds
+    ``100 / n_pairs``, so a row sums to 100. This is PCL 1.13's
+    ``PFHEstimation`` (``PFHSignature125`` for ``n_bins=5``).
+
+    Read more in the :ref:`User Guide <local_descriptors>`.
+
+    Parameters
+    ----------
     n_neighbors : int, default=None
         k for the k-nearest-neighbour search, the point itself included (PCL
         ``setKSearch``, Open3D ``max_nn``). When neither ``n_neighbors`` nor
         ``radius`` is given, k = 10.
     radius : float, default=None
         Radius search instead (PCL ``setRadiusSearch``); give one of the two.
-    n_bins : int, default=@N_BINS@
-        Bins per feature (@BINS_DOC@).
+    n_bins : int, default=5
+        Bins per feature (PCL ``nr_subdiv``; n_bins ** 3 bins).
     normals : {"auto", "columns", "estimate"}, default="auto"
         Where the normals come from. ``"auto"``: a cloud with 6 or more
         columns carries its normals in columns 3-5 (the layout of
@@ -749,34 +761,7 @@ _COMMON_PARAMS = """
         cores. Under a backend chosen with :func:`joblib.parallel_config`
         (e.g. ``"dask"``): the batches of clouds run at once (None: the
         backend's), each on the cores left to its task.
-"""
 
-
-_CONVENTION_DOC = """    convention : {"pcl", "open3d", "paper"}, default="pcl"
-        PCL's FPFH, Open3D's (adds the point's own SPFH) or the paper's
-        (1/distance weights); see :func:`compute_fpfh`.
-"""
-
-
-def _params(n_bins, bins_doc):
-    return _COMMON_PARAMS.replace("@N_BINS@", str(n_bins)).replace(
-        "@BINS_DOC@", bins_doc
-    )
-
-
-class PFHTransformer(_LocalDescriptor):
-    __doc__ = f"""Point Feature Histogram of every point, bin for bin as PCL.
-
-    For every pair of points in a point's neighbourhood (the point
-    included), three angles between their normals and the line joining them
-    are binned into ``n_bins ** 3`` bins, f1 varying fastest; each pair adds
-    ``100 / n_pairs``, so a row sums to 100. This is PCL 1.13's
-    ``PFHEstimation`` (``PFHSignature125`` for ``n_bins=5``).
-
-    Read more in the :ref:`User Guide <local_descriptors>`.
-
-    Parameters
-    ----------{_params(5, "PCL ``nr_subdiv``; n_bins ** 3 bins")}
     Attributes
     ----------
     n_features_in_ : int
@@ -850,7 +835,7 @@ class PFHTransformer(_LocalDescriptor):
 
 
 class FPFHTransformer(_LocalDescriptor):
-    __doc__ = f"""Fast Point Feature Histogram of every point.
+    """Fast Point Feature Histogram of every point.
 
     The SPFH of a point bins the three angles of the pairs (point,
     neighbour) into three ``n_bins`` histograms; the FPFH combines the
@@ -861,7 +846,64 @@ class FPFHTransformer(_LocalDescriptor):
     Read more in the :ref:`User Guide <local_descriptors>`.
 
     Parameters
-    ----------{_params(11, "3 * n_bins values")}{_CONVENTION_DOC}
+    ----------
+    n_neighbors : int, default=None
+        k for the k-nearest-neighbour search, the point itself included (PCL
+        ``setKSearch``, Open3D ``max_nn``). When neither ``n_neighbors`` nor
+        ``radius`` is given, k = 10.
+    radius : float, default=None
+        Radius search instead (PCL ``setRadiusSearch``); give one of the two.
+    n_bins : int, default=11
+        Bins per feature (3 * n_bins values).
+    normals : {"auto", "columns", "estimate"}, default="auto"
+        Where the normals come from. ``"auto"``: a cloud with 6 or more
+        columns carries its normals in columns 3-5 (the layout of
+        :class:`~skpcd.preprocessing.NormalEstimator`, and of PCL's
+        ``PointNormal``), used as given, as PCL's ``setInputNormals`` uses
+        them; a cloud with 3 to 5 columns gets estimated normals (PCA,
+        PCL's rules, see :func:`~skpcd.preprocessing.estimate_normals`).
+        ``"columns"``: every cloud carries them (fewer than 6 columns is an
+        error). ``"estimate"``: always estimated, columns 3-5 ignored.
+        Given normals are not renormalised: a norm more than 1e-3 away from
+        1 is a ValueError naming the cloud. A row with a NaN is an undefined
+        normal, as PCL's ``NormalEstimation`` writes it (see
+        ``undefined``).
+    normal_n_neighbors : int, default=None
+        k for the estimated normals; by default the descriptor's own
+        neighbourhoods are reused (one search for both). Setting it for a
+        cloud whose normals are given is an error (it would be ignored).
+    normal_radius : float, default=None
+        Radius for the estimated normals instead; likewise refused with
+        given normals.
+    viewpoint : "corner" or tuple of 3 float, default="corner"
+        Estimated normals face this point (PCL ``setViewPoint``).
+        ``"corner"``: a point fixed to each cloud, below and beside it
+        (``min - (max - min) - 1`` per axis), so the descriptors do not
+        depend on where the cloud lies. Three numbers: a point in the
+        clouds' coordinates, the same for all (the sensor's position);
+        ``(0, 0, 0)``, PCL's default, gives PCL's histograms bin for bin
+        (see "Coordinates far from the origin" in the user guide). Given
+        normals keep their sign: a viewpoint with given normals is an
+        error.
+    undefined : {"nan", "zero", "drop", "keep"}, default="nan"
+        Points whose descriptor is undefined (their normal is undefined,
+        estimated or given as NaN, or they have no neighbour): a NaN row, a
+        zero row, no row, or the value PCL computes for them anyway
+        ("keep", which bins NaN features in bin 0). As a neighbour, a point
+        with a NaN normal is binned as PCL bins it (bin 0) whatever the
+        policy. :meth:`undefined_mask` says which points they are.
+    pooling : {"mean", "sum", "max"}, default=None
+        Return one row per cloud, pooled over its defined rows, instead of a
+        list of per-point arrays.
+    convention : {"pcl", "open3d", "paper"}, default="pcl"
+        PCL's FPFH, Open3D's (adds the point's own SPFH) or the paper's
+        (1/distance weights); see :func:`compute_fpfh`.
+    n_jobs : int, default=None
+        Threads for the searches and the kernels; None means 1, -1 all
+        cores. Under a backend chosen with :func:`joblib.parallel_config`
+        (e.g. ``"dask"``): the batches of clouds run at once (None: the
+        backend's), each on the cores left to its task.
+
     Attributes
     ----------
     n_features_in_ : int
