@@ -143,12 +143,48 @@ def test_sklearn_checks(estimator, check):
 
 # Scene estimators: X is one cloud, a 2-D array; sklearn's full checks run
 # in tests/segmentation/test_clusters.py, the data-free ones here.
+from skpcd.preprocessing import RadiusOutlierFilter, StatisticalOutlierFilter  # noqa: E402
 from skpcd.segmentation import AutoEpsDBSCAN, EuclideanClusters, GroundFilter  # noqa: E402
 
-SCENE = [AutoEpsDBSCAN(), EuclideanClusters(), GroundFilter()]
+SCENE = [
+    AutoEpsDBSCAN(),
+    EuclideanClusters(),
+    GroundFilter(),
+    RadiusOutlierFilter(),
+    StatisticalOutlierFilter(),
+]
 
 
 @pytest.mark.parametrize("check", DATA_FREE_CHECKS, ids=_id)
 @pytest.mark.parametrize("estimator", SCENE, ids=_id)
 def test_sklearn_data_free_checks_scene(estimator, check):
     check(type(estimator).__name__, estimator)
+
+
+def _public_estimators():
+    """Every estimator class that a public package of skpcd exports."""
+    import importlib
+    import inspect
+    import pkgutil
+
+    from sklearn.base import BaseEstimator
+
+    import skpcd
+
+    found = set()
+    for module in pkgutil.iter_modules(skpcd.__path__):
+        if module.name.startswith("_"):
+            continue
+        package = importlib.import_module(f"skpcd.{module.name}")
+        for name in getattr(package, "__all__", []):
+            obj = getattr(package, name)
+            if inspect.isclass(obj) and issubclass(obj, BaseEstimator):
+                found.add(obj)
+    return found
+
+
+def test_every_public_estimator_is_checked():
+    checked = {type(e) for e in RAGGED + DESCRIPTOR_INPUT + TWO_D + SCENE}
+    public = _public_estimators()
+    assert len(public) >= 18
+    assert public - checked == set()

@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from skpcd.preprocessing import RadiusOutlierFilter, StatisticalOutlierFilter
 
@@ -73,3 +74,27 @@ def test_tiny_clouds():
     est = StatisticalOutlierFilter(n_neighbors=8, std_ratio=0.5).fit(three)
     np.testing.assert_allclose(est.mean_distances_, [25.5, 25, 49.5], rtol=1e-6)
     assert est.inlier_mask_.tolist() == [True, True, False]
+
+
+# sklearn's checks that fit on 2-column data cannot run on a cloud, which
+# needs x, y and z (as for GroundFilter in tests/segmentation/test_clusters.py)
+OUTLIER_EXPECTED_FAILURES = dict.fromkeys(
+    (
+        "check_estimators_overwrite_params",
+        "check_estimators_fit_returns_self",
+        "check_readonly_memmap_input",
+        "check_outliers_fit_predict",
+        "check_fit_idempotent",
+        "check_fit_check_is_fitted",
+        "check_n_features_in",
+    ),
+    "a cloud needs 3 columns (x, y, z); the check fits it on 2",
+)
+
+
+@parametrize_with_checks(
+    [RadiusOutlierFilter(), StatisticalOutlierFilter()],
+    expected_failed_checks=lambda est: OUTLIER_EXPECTED_FAILURES,
+)
+def test_sklearn_compatible(estimator, check):
+    check(estimator)
