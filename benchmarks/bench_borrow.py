@@ -50,7 +50,7 @@ def worker(spec):
     if spec["variant"] == "no borrow":
         _no_borrow()
     from skpcd.features import FPFHTransformer
-    from skpcd.preprocessing._neighbors import search_packed
+    from skpcd.neighbors._neighbors import search_packed
     from skpcd.segmentation._clusters import grid_dbscan
 
     arrays = np.load(spec["data"])

@@ -335,7 +335,7 @@ def _worker_profile(spec, clouds):
     """skpcd's stages, timed one by one the way the transformers chain them."""
     from skpcd.features import FPFHTransformer, PFHTransformer
     from skpcd.features._pfh import _fpfh_packed, _pfh_packed
-    from skpcd.preprocessing._neighbors import search_packed
+    from skpcd.neighbors._neighbors import search_packed
     from skpcd.preprocessing._normals import _normals_f32, pack_neighborhoods
     from skpcd.utils import check_point_clouds
 

@@ -91,7 +91,7 @@ def _stage(name, threads):
     """The call to time (a function of no argument) for ``name``."""
     clouds = _dales()
     if name in ("search", "normals"):
-        from skpcd.preprocessing._neighbors import search_packed
+        from skpcd.neighbors._neighbors import search_packed
         from skpcd.preprocessing._normals import _normals_f32
 
         xyz, offsets = _packed(clouds)

@@ -3,14 +3,19 @@
 import os
 import re
 import socket
+import sys
 from pathlib import Path
 
 from docutils import nodes
 
+# The documentation of this checkout: its skpcd, not an installed one (and
+# the numba kernels the test run compiled and cached beside it, rather than
+# a second compilation of every kernel for the gallery).
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
 import skpcd
 from skpcd.datasets import DALES_ENV
-
-ROOT = Path(__file__).resolve().parents[1]
 
 # Which data the gallery runs on. The examples read the DALES objects with
 # skpcd.datasets.load_dales_objects, from the folder named by SKPCD_DALES_DIR, and

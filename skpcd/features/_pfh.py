@@ -23,13 +23,8 @@ from skpcd.features._pfh_kernels import (
     spfh_rows,
     spfh_values,
 )
-from skpcd.preprocessing._grid import (
-    ball_block,
-    ball_block_normals,
-    radius_grid,
-    snake_order,
-)
-from skpcd.preprocessing._neighbors import (
+from skpcd.neighbors._grid import ball_block, radius_grid, snake_order
+from skpcd.neighbors._neighbors import (
     Neighborhoods,
     compute_neighborhoods,
     scattered,
@@ -38,6 +33,7 @@ from skpcd.preprocessing._normals import (
     CLOUD_VIEWPOINT,
     _check_viewpoint,
     _normals_f32,
+    ball_block_normals,
     local_viewpoints,
     pack_neighborhoods,
 )
@@ -195,7 +191,7 @@ def _radius_of(p, nb):
 
 def _space_order(p, radius, cloud=None, n_threads=1):
     """The points in a snake order over cells a quarter of ``radius`` wide
-    (:func:`~skpcd.preprocessing._grid.snake_order`), cloud by cloud with
+    (:func:`~skpcd.neighbors._grid.snake_order`), cloud by cloud with
     ``cloud`` (each point's cloud: clouds in their local frames overlap)."""
     return snake_order(p, 0.25 * radius, cloud, n_threads)
 

@@ -1,6 +1,10 @@
-"""Preprocessing of point clouds: spacing, sampling, neighbourhoods, normals."""
+"""Preprocessing of point clouds: spacing, sampling, normals, outliers.
 
-from skpcd.preprocessing._neighbors import Neighborhoods, compute_neighborhoods
+The neighbourhoods (:func:`compute_neighborhoods`, :class:`Neighborhoods`)
+live in :mod:`skpcd.neighbors` and are importable from here too.
+"""
+
+from skpcd.neighbors import Neighborhoods, compute_neighborhoods
 from skpcd.preprocessing._normals import NormalEstimator, estimate_normals
 from skpcd.preprocessing._outliers import RadiusOutlierFilter, StatisticalOutlierFilter
 from skpcd.preprocessing._sampling import GridSampler, grid_sample

@@ -6,11 +6,9 @@ from numbers import Integral, Real
 import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
 
-from skpcd.preprocessing._neighbors import (
-    compute_neighborhoods,
-    search_packed,
-)
-from skpcd.preprocessing._normals_kernels import normals_rows
+from skpcd.neighbors._grid import BLOCK_CHUNK
+from skpcd.neighbors._neighbors import compute_neighborhoods, search_packed
+from skpcd.preprocessing._normals_kernels import ball_normals, normals_rows
 from skpcd.utils import check_point_clouds
 from skpcd.utils._compile import entry_point
 from skpcd.utils._estimator import CloudTransformer
@@ -116,7 +114,7 @@ def estimate_normals(
         gives PCL's normals bin for bin.
     neighborhoods : Neighborhoods, default=None
         Precomputed neighbourhoods (from
-        :func:`~skpcd.preprocessing.compute_neighborhoods`), to share one
+        :func:`~skpcd.neighbors.compute_neighborhoods`), to share one
         search between normals and descriptors.
     n_jobs : int, default=None
         Threads; None means 1, -1 all cores.
@@ -354,7 +352,7 @@ def pack_neighborhoods(
     return_order : bool, default=False
         Also return the search's grid order of the points: ``order[t]`` is
         the index in ``xyz`` of the ``t``-th point in that order, or None
-        (:func:`~skpcd.preprocessing._neighbors.search_packed`).
+        (:func:`~skpcd.neighbors._neighbors.search_packed`).
 
     Returns
     -------
@@ -380,3 +378,20 @@ def pack_neighborhoods(
         **search,
     )
     return (xyz, offsets, *found) if return_order else (xyz, offsets, found)
+
+
+def ball_block_normals(
+    grid, radius, cells, counts, points, viewpoints, normals, curvature, n_threads
+):
+    """The ball sizes of a block of cells (as ``neighbors._grid.ball_block``),
+    and the normal and curvature of every point of the block from its sorted
+    ball, no neighbourhood stored (``_normals_kernels.ball_normals``)."""
+    c0, c1 = cells
+    t0 = int(grid.cell_start[c0])
+    r2 = float(radius) ** 2
+    est = (points, viewpoints, normals, curvature)
+
+    def run(lo, hi):
+        ball_normals(c0 + lo, c0 + hi, t0, grid, r2, counts, *est)
+
+    parallel_rows(run, c1 - c0, n_threads, min_chunk=BLOCK_CHUNK)

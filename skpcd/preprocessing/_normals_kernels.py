@@ -16,7 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
-from skpcd.preprocessing._grid_kernels import _ball
+from skpcd.neighbors._grid_kernels import _ball
 from skpcd.utils._numba import borrow, keep
 
 F0 = np.float32(0.0)
@@ -195,7 +195,7 @@ def ball_normals(
 ):
     """Radius neighbourhood sizes and normals of the points of cells ``lo``
     to ``hi``, nothing else stored: each ball is searched on ``grid``
-    (:func:`~skpcd.preprocessing._grid_kernels.ball_cells_local`, rows by
+    (:func:`~skpcd.neighbors._grid_kernels.ball_cells_local`, rows by
     sorted position minus ``base``), sorted, and its normal and curvature
     estimated (:func:`normals_rows` on it). ``points`` are float32 in their
     clouds' local frames, ``viewpoints`` one row per cloud in the same

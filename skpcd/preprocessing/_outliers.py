@@ -1,7 +1,7 @@
 """Outlier removal: the statistical and radius filters of PCL and PDAL.
 
 Both flag the points of one cloud from their neighbourhoods in that cloud
-(found once by :func:`~skpcd.preprocessing.compute_neighborhoods`), as PCL's
+(found once by :func:`~skpcd.neighbors.compute_neighborhoods`), as PCL's
 ``StatisticalOutlierRemoval`` and ``RadiusOutlierRemoval`` and PDAL's
 ``filters.outlier`` do: a far point (a bird, a multipath echo, a point
 1 km away) is removed before a step whose cost follows the extent of the
@@ -16,7 +16,7 @@ from sklearn.base import BaseEstimator, OutlierMixin, _fit_context
 from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import validate_data
 
-from skpcd.preprocessing._neighbors import compute_neighborhoods
+from skpcd.neighbors._neighbors import compute_neighborhoods
 from skpcd.utils._compile import entry_point
 from skpcd.utils._validation import refuse_sequence
 
@@ -100,7 +100,7 @@ class StatisticalOutlierFilter(_OutlierFilter):
 
     Notes
     -----
-    Distances are those of :func:`~skpcd.preprocessing.compute_neighborhoods`
+    Distances are those of :func:`~skpcd.neighbors.compute_neighborhoods`
     (squared distances stored in float32, as PCL's). A cloud of at most
     ``n_neighbors`` points gives each point all the others; a cloud of one
     point keeps it.
@@ -208,7 +208,7 @@ class RadiusOutlierFilter(_OutlierFilter):
     Notes
     -----
     The neighbours are counted by
-    :func:`~skpcd.preprocessing.compute_neighborhoods` (memory
+    :func:`~skpcd.neighbors.compute_neighborhoods` (memory
     O(n_points * neighbours): choose a radius of a few point spacings).
 
     Examples

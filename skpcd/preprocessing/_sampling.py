@@ -7,9 +7,9 @@ from numbers import Integral, Real
 import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
 
+from skpcd.neighbors._grid import argsort_keys
+from skpcd.neighbors._neighbors import _check_points
 from skpcd.preprocessing import _sampling_kernels as k
-from skpcd.preprocessing._grid import argsort_keys
-from skpcd.preprocessing._neighbors import _check_points
 from skpcd.preprocessing._spacing import point_spacing
 from skpcd.utils import check_point_clouds
 from skpcd.utils._compile import entry_point

@@ -1,9 +1,9 @@
 """numba kernels for density clustering on the sorted voxel grid.
 
-The grid is the radius-search grid of :mod:`skpcd.preprocessing._neighbors`:
+The grid is the radius-search grid of :mod:`skpcd.neighbors._neighbors`:
 cells at least ``eps`` wide, points sorted by cell key, so that the points
 within ``eps`` of a point lie in the 27 cells around its cell, found as 9
-runs of memory by :func:`skpcd.preprocessing._grid_kernels.cell_block`.
+runs of memory by :func:`skpcd.neighbors._grid_kernels.cell_block`.
 
 Nothing here stores a neighbourhood. The kernels work on *sorted positions*
 ``t`` (the point ``order[t]``): a union-find forest ``parent`` over
@@ -15,7 +15,7 @@ nearest core point within ``eps``. Memory is O(n_points).
 import numpy as np
 from numba import njit
 
-from skpcd.preprocessing._grid_kernels import borrow_grid, cell_block
+from skpcd.neighbors._grid_kernels import borrow_grid, cell_block
 from skpcd.utils._numba import borrow, keep
 
 

@@ -23,7 +23,7 @@ from sklearn.utils import check_array
 from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import validate_data
 
-from skpcd.preprocessing._grid import ball_counts, radius_grid
+from skpcd.neighbors._grid import ball_counts, radius_grid
 from skpcd.segmentation import _cluster_kernels as k
 from skpcd.utils._compile import entry_point
 from skpcd.utils._parallel import effective_threads, parallel_rows, parallel_section

@@ -95,7 +95,7 @@ def csf_ground(
     of fewer than 10 points is ground. Empty parts of a group's bounding
     box far from its points are filled (:func:`_far_fill`).
     """
-    from skpcd.segmentation._ground import _MAX_CELLS, _cell_indices, _islands
+    from skpcd.segmentation._raster import MAX_CELLS, cell_indices, islands
 
     _import_csf()
     ground = np.zeros(len(xyz), dtype=bool)
@@ -109,17 +109,17 @@ def csf_ground(
         "iterations": iterations,
         "time_step": time_step,
     }
-    _, nx, ny, cells = _cell_indices(xyz, float(cloth_resolution))
+    _, nx, ny, cells = cell_indices(xyz, float(cloth_resolution))
     if nx * ny <= max(len(xyz), 4 * _ISLAND_CELLS**2):
         rects, label = np.array([[0, 0, nx - 1, ny - 1]]), None
     else:
-        rects, label = _islands(cells, _ISLAND_CELLS)
+        rects, label = islands(cells, _ISLAND_CELLS)
     del cells
     sizes = (rects[:, 2:] - rects[:, :2] + 1).prod(axis=1)
-    if sizes.sum() > _MAX_CELLS:
+    if sizes.sum() > MAX_CELLS:
         raise ValueError(
             f"the occupied part of the scene needs {int(sizes.sum())} cloth "
-            f"particles of {cloth_resolution} (more than {_MAX_CELLS}); use a "
+            f"particles of {cloth_resolution} (more than {MAX_CELLS}); use a "
             "larger cell"
         )
     if label is None:

@@ -23,7 +23,8 @@ from skpcd.segmentation._dbscan import (
     eps_from_knee,
     sample_queries,
 )
-from skpcd.segmentation._ground import GroundFilter, minimum_raster, reach_cells
+from skpcd.segmentation._ground import GroundFilter, reach_cells
+from skpcd.segmentation._raster import minimum_raster
 from skpcd.segmentation._spill import (
     TiledScene,
     check_chunk_size,

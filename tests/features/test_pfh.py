@@ -457,7 +457,7 @@ def test_fpfh_of_a_shuffled_cloud_in_grid_order_is_the_same(convention, monkeypa
     # a shuffled cloud is computed renumbered in grid order (its neighbours
     # far apart in memory): the same bits as in its own order
     from skpcd.features._pfh import _LocalDescriptor
-    from skpcd.preprocessing._neighbors import _NEAR, scattered, search_packed
+    from skpcd.neighbors._neighbors import _NEAR, scattered, search_packed
 
     rng = np.random.default_rng(7)
     n = 4 * _NEAR
@@ -491,7 +491,7 @@ def test_fpfh_renumbered_keeps_undefined_points_radius_and_normal_search(monkeyp
     # the renumbered path with undefined points (a collinear group: no normal),
     # every undefined policy, undefined_mask, a radius search and a separate
     # normal search: the same rows as without renumbering
-    from skpcd.preprocessing._neighbors import _NEAR
+    from skpcd.neighbors._neighbors import _NEAR
 
     rng = np.random.default_rng(11)
     n = 4 * _NEAR

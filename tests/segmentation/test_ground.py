@@ -230,7 +230,7 @@ def test_far_outlier_costs_its_own_cells_not_the_bounding_box():
 def test_occupied_cells_cap(monkeypatch):
     import skpcd.segmentation._ground as module
 
-    monkeypatch.setattr(module, "_MAX_CELLS", 10_000)
+    monkeypatch.setattr(module, "MAX_CELLS", 10_000)
     X = np.array([[0.0, 0, 0], [1e6, 1e6, 0]])
     with pytest.raises(ValueError, match=r"occupied part .* cells .*use a larger"):
         GroundFilter().fit(X)
@@ -300,6 +300,7 @@ def test_n_jobs_gives_the_same_bits_in_small_chunks(monkeypatch):
     # many parts, bands and chunks of every size (3 threads: uneven ones), on
     # islands (a far group of points) and on zeros of both signs
     import skpcd.segmentation._ground as module
+    import skpcd.segmentation._raster as raster
 
     ground, objects = _scene(5)
     far = ground[:3000] + np.array([500.0, 0.0, 3.0])
@@ -312,8 +313,8 @@ def test_n_jobs_gives_the_same_bits_in_small_chunks(monkeypatch):
     )
     params = {"cell": 0.5, "window": 4.0}
     one = _outputs(GroundFilter(**params, n_jobs=1), X, Q)
-    monkeypatch.setattr(module, "_MIN_CELLS", 50)
-    monkeypatch.setattr(module, "_MIN_PART_POINTS", 500)
+    monkeypatch.setattr(raster, "_MIN_CELLS", 50)
+    monkeypatch.setattr(raster, "_MIN_PART_POINTS", 500)
     monkeypatch.setattr(module, "_BAND_HALOS", 1)
     for n_jobs in (2, 3):
         _assert_bit_identical(

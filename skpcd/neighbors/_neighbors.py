@@ -6,7 +6,7 @@ PCL's k-d tree returns it. ``sqdist`` holds the squared distances, float32 as
 in PCL.
 
 Two search algorithms give the same neighbourhoods: ``"grid"``, numba kernels
-on a sorted voxel grid (:mod:`skpcd.preprocessing._grid_kernels`), and
+on a sorted voxel grid (:mod:`skpcd.neighbors._grid_kernels`), and
 ``"kd_tree"``, :class:`scipy.spatial.cKDTree` with parallel queries. Both
 take several clouds packed one after the other and never cross clouds.
 """
@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from skpcd.preprocessing import _grid_kernels as g
-from skpcd.preprocessing._grid import (
+from skpcd.neighbors import _grid_kernels as g
+from skpcd.neighbors._grid import (
     VoxelGrid,
     ball_counts,
     ball_lists,
@@ -384,7 +384,7 @@ def _search_packed(
 def _knn_grid(xyz, cloud_ptr, k, lo_hi=None, n_threads=1):
     """Grid for k-nearest searches, cell sizes adapted to each cloud's density.
 
-    Returns the :class:`~skpcd.preprocessing._grid.VoxelGrid`.
+    Returns the :class:`~skpcd.neighbors._grid.VoxelGrid`.
     """
     sizes = np.diff(cloud_ptr)
     target = max(1.0, _OCCUPANCY * k)

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from skpcd.preprocessing._grid import argsort_keys, build_grid, snake_order
+from skpcd.neighbors._grid import argsort_keys, build_grid, snake_order
 
 
 @pytest.mark.parametrize("top", [0, 5, 3000, 2**40, 2**62 - 1])

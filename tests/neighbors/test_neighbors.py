@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy.spatial.distance import cdist
 
-from skpcd.preprocessing import compute_neighborhoods
+from skpcd.neighbors import compute_neighborhoods
 
 
 def test_knn_self_first_sorted():
@@ -70,7 +70,7 @@ def _assert_same(a, b, ties_ok=False):
 def test_grid_equals_kd_tree_on_random_and_clustered_clouds(
     search, brute_work, monkeypatch
 ):
-    from skpcd.preprocessing import _neighbors
+    from skpcd.neighbors import _neighbors
 
     if brute_work is not None:
         monkeypatch.setattr(_neighbors, "_BRUTE_WORK", brute_work)
@@ -109,7 +109,7 @@ def test_grid_ties_on_a_lattice_keep_lowest_indices():
 
 
 def test_packed_search_never_crosses_clouds():
-    from skpcd.preprocessing._neighbors import search_packed
+    from skpcd.neighbors._neighbors import search_packed
 
     rng = np.random.default_rng(0)
     a, b = rng.random((300, 3)), rng.random((5, 3))  # same place, two clouds
@@ -133,7 +133,7 @@ def test_unknown_algorithm_is_refused():
 
 def test_grid_equals_kd_tree_on_objects(labelled_objects):
     clouds = labelled_objects[0][:25]
-    from skpcd.preprocessing._neighbors import search_packed
+    from skpcd.neighbors._neighbors import search_packed
     from skpcd.preprocessing._normals import pack_neighborhoods
 
     xyz, ptr, grid = pack_neighborhoods(clouds, n_neighbors=10, n_threads=2)
@@ -183,7 +183,7 @@ def _scan_like(n, seed=0):
 
 
 def test_grid_order_is_a_permutation_within_clouds_and_renumbering_is_exact():
-    from skpcd.preprocessing._neighbors import search_packed
+    from skpcd.neighbors._neighbors import search_packed
 
     rng = np.random.default_rng(3)
     xyz = np.vstack([rng.random((700, 3)), rng.random((300, 3)) + 5.0])
@@ -210,7 +210,7 @@ def test_grid_order_is_a_permutation_within_clouds_and_renumbering_is_exact():
 
 
 def test_scattered_tells_a_shuffled_cloud_from_one_in_scan_order():
-    from skpcd.preprocessing._neighbors import _NEAR, scattered, search_packed
+    from skpcd.neighbors._neighbors import _NEAR, scattered, search_packed
 
     n = 3 * _NEAR
     xyz = _scan_like(n)

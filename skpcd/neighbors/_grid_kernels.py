@@ -21,8 +21,8 @@ Neighbours come sorted by squared distance (float64, from float64
 coordinates), ties by index, the query point itself first.
 
 The kernels take the grid as one argument, a
-:class:`~skpcd.preprocessing._grid.VoxelGrid` (a NamedTuple of arrays,
-which numba passes as a tuple); :mod:`skpcd.preprocessing._grid` builds it
+:class:`~skpcd.neighbors._grid.VoxelGrid` (a NamedTuple of arrays,
+which numba passes as a tuple); :mod:`skpcd.neighbors._grid` builds it
 and holds the entry points that other packages call.
 """
 

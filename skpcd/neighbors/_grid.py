@@ -1,14 +1,15 @@
 """The sorted voxel grid: one type and the entry points other packages call.
 
-The neighbour search (:mod:`skpcd.preprocessing._neighbors`), the grid
+The neighbour search (:mod:`skpcd.neighbors._neighbors`), the grid
 DBSCAN (:mod:`skpcd.segmentation._clusters`) and the blocked radius PFH
 (:mod:`skpcd.features._pfh`) all bucket packed clouds into cubic cells and
 sort the points by (cloud, cell key); the kernels that walk the grid are in
-:mod:`skpcd.preprocessing._grid_kernels`. Outside ``preprocessing`` the
+:mod:`skpcd.neighbors._grid_kernels`. Outside ``neighbors`` the
 grid is a :class:`VoxelGrid`, built by :func:`radius_grid` (or
 :func:`build_grid`) and searched through :func:`ball_counts`,
-:func:`ball_lists`, :func:`ball_block` and :func:`ball_block_normals`;
-the k-nearest search (:func:`~skpcd.preprocessing._neighbors.search_packed`)
+:func:`ball_lists` and :func:`ball_block` (the normals of a block without
+its neighbourhoods: ``skpcd.preprocessing._normals.ball_block_normals``);
+the k-nearest search (:func:`~skpcd.neighbors._neighbors.search_packed`)
 passes it to its own kernel. Nobody outside indexes tuples of cell arrays
 or passes empty arrays as switches.
 """
@@ -19,16 +20,15 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from skpcd.preprocessing import _grid_kernels as g
-from skpcd.preprocessing._normals_kernels import ball_normals
+from skpcd.neighbors import _grid_kernels as g
 from skpcd.utils._parallel import parallel_rows, parallel_section
 from skpcd.utils._validation import cloud_bounds
 
 __all__ = [
+    "BLOCK_CHUNK",
     "VoxelGrid",
     "argsort_keys",
     "ball_block",
-    "ball_block_normals",
     "ball_counts",
     "ball_lists",
     "build_grid",
@@ -158,7 +158,7 @@ def sort_points(xyz, cloud_ptr, origin, h, dims, n_threads=1):
 
     Returns ``order`` (point indices in that order) and the tuple
     ``(cell_cloud, cell_key, cell_start, cloud_cells)`` of
-    :func:`~skpcd.preprocessing._grid_kernels.sorted_cells`.
+    :func:`~skpcd.neighbors._grid_kernels.sorted_cells`.
     """
     n = len(xyz)
     keys = np.empty(n, dtype=np.int64)
@@ -226,7 +226,7 @@ def snake_order(points, h, cloud=None, n_threads=1):
 
     Consecutive points of the walk are near each other (the pair reuse of
     the PFH kernels visits neighbourhoods in this order). A stable radix
-    sort of one key per point (:func:`~skpcd.preprocessing._grid_kernels.\
+    sort of one key per point (:func:`~skpcd.neighbors._grid_kernels.\
 snake_keys`), ten times faster than ``np.lexsort`` of the cell coordinates,
     which remains the fallback for keys beyond an int64; ``n_threads``
     for the sort.
@@ -287,7 +287,7 @@ def ball_lists(grid, radius, indptr, counts, indices, sqdist, n_threads):
 
 
 # cells per thread chunk of a block (blocks are small: split them anyway)
-_FEW = 64
+BLOCK_CHUNK = 64
 
 
 def ball_block(grid, radius, cells, counts, n_threads, indptr=None, *, sort=True):
@@ -311,22 +311,5 @@ def ball_block(grid, radius, cells, counts, n_threads, indptr=None, *, sort=True
             c0 + lo, c0 + hi, t0, grid, r2, indptr, counts, indices, sort
         )
 
-    parallel_rows(run, c1 - c0, n_threads, min_chunk=_FEW)
+    parallel_rows(run, c1 - c0, n_threads, min_chunk=BLOCK_CHUNK)
     return indices
-
-
-def ball_block_normals(
-    grid, radius, cells, counts, points, viewpoints, normals, curvature, n_threads
-):
-    """:func:`ball_block` sizes, and the normal and curvature of every point
-    of the block from its sorted ball, no neighbourhood stored
-    (:func:`~skpcd.preprocessing._normals_kernels.ball_normals`)."""
-    c0, c1 = cells
-    t0 = int(grid.cell_start[c0])
-    r2 = float(radius) ** 2
-    est = (points, viewpoints, normals, curvature)
-
-    def run(lo, hi):
-        ball_normals(c0 + lo, c0 + hi, t0, grid, r2, counts, *est)
-
-    parallel_rows(run, c1 - c0, n_threads, min_chunk=_FEW)
