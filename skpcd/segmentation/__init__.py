@@ -23,7 +23,7 @@ from skpcd.segmentation._scan_kind import (
 )
 from skpcd.segmentation._scene import SceneSegmentation, make_scene, segment_scene
 from skpcd.segmentation._structures import STRUCTURE_DEFAULTS
-from skpcd.segmentation._tiling import TiledScene, TileGrid, tile_scene
+from skpcd.segmentation.tiling import TiledScene, TileGrid, tile_scene
 
 __all__ = [
     "GROUND_PRESETS",

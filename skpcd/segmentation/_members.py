@@ -72,7 +72,7 @@ def iter_segment_points(
     extras : dict of str to ndarray
         Their fields (empty without ``fields``).
     """
-    from skpcd.segmentation._spill import iter_chunks
+    from skpcd.segmentation.tiling._spill import iter_chunks
 
     spill = Path(tempfile.mkdtemp(prefix=".skpcd_segments_", dir=folder))
     try:

@@ -350,7 +350,7 @@ def segment_scene(
         )
         ground = "aerial" if scan.kind == "airborne" else "mobile"
     if tile_size is not None:
-        from skpcd.segmentation._tiling import segment_tiled
+        from skpcd.segmentation.tiling._segment import segment_tiled
 
         filt = _ground_filter(ground, n_jobs)
         if ground is not None:

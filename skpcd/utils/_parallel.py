@@ -268,7 +268,7 @@ def batch_bounds(sizes, batch_points):
     return bounds
 
 
-def _chosen_backend():
+def chosen_backend():
     """The joblib backend that batches are dispatched to, or None to run
     in-process.
 
@@ -294,7 +294,7 @@ def _chosen_backend():
     return backend
 
 
-def _dask_hosts(backend):
+def dask_hosts(backend):
     """Threads of all Dask workers per host, if ``backend`` is joblib's Dask
     backend; else None."""
     client = getattr(backend, "client", None)
@@ -327,7 +327,7 @@ def _task_threads(n_threads, hosts):
     return max(1, cpu_count() // max(busy, 1))
 
 
-def _run_batch(func, batch, n_threads, hosts):
+def run_batch(func, batch, n_threads, hosts):
     """Run one batch of :func:`map_batches` with the threads of its task."""
     n_threads = _task_threads(n_threads, hosts)
     before = getattr(_TASK, "n_threads", None)
@@ -357,7 +357,7 @@ def map_batches(
 
     Outside a :func:`joblib.parallel_config` context that chooses a
     backend (and with joblib's default backend, loky, even when chosen:
-    see ``_chosen_backend``), this is ``func(items, effective_threads(n_jobs))``:
+    see ``chosen_backend``), this is ``func(items, effective_threads(n_jobs))``:
     one call, in-process. Inside one (``backend="dask"`` with a
     ``dask.distributed.Client``, ``"threading"``, ``"multiprocessing"``,
     any registered backend), the items are cut into contiguous
@@ -426,7 +426,7 @@ def map_batches(
     ...     map_batches(sizes, clouds, batch_points=5)
     [2, 3, 4]
     """
-    backend = _chosen_backend() if len(items) else None
+    backend = chosen_backend() if len(items) else None
     if backend is None and not (bounded and len(items) > 1):
         return func(items, effective_threads(n_jobs))
     if sizes is None:
@@ -449,8 +449,8 @@ def map_batches(
     bounds = batch_bounds(sizes, max(1, min(int(batch_points), even)))
     inner = getattr(backend, "inner_max_num_threads", None)
     n_threads = inner or max(1, cpu_count() // n_tasks)
-    hosts = None if inner else _dask_hosts(backend)
+    hosts = None if inner else dask_hosts(backend)
     tasks = (
-        delayed(_run_batch)(func, items[lo:hi], n_threads, hosts) for lo, hi in bounds
+        delayed(run_batch)(func, items[lo:hi], n_threads, hosts) for lo, hi in bounds
     )
     return _concat(Parallel(n_jobs=n_jobs, batch_size=1)(tasks))

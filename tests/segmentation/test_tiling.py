@@ -11,8 +11,8 @@ import pytest
 
 from skpcd.segmentation import make_scene
 from skpcd.segmentation import segment_scene as _segment_scene
-from skpcd.segmentation._spill import tile_scene
-from skpcd.segmentation._tile_geometry import TileGrid
+from skpcd.segmentation.tiling._geometry import TileGrid
+from skpcd.segmentation.tiling._spill import tile_scene
 
 
 def segment_scene(*args, **kwargs):
@@ -191,7 +191,7 @@ def test_tiled_on_a_backend_that_cannot_read_the_tile_files(
     # "shipped": a backend on other machines (the driver reads and ships the
     # tiles); "unseen": the tasks cannot read the files although the backend
     # said they could (the driver computes those tiles, then ships)
-    import skpcd.segmentation._tile_dispatch as dispatch
+    import skpcd.segmentation.tiling._dispatch as dispatch
 
     points, _ = scene
     calls = []
@@ -218,7 +218,7 @@ class DaskDistributedBackend:  # the name joblib's Dask backend has
 def test_tasks_read_the_tile_files_only_on_this_machine():
     from joblib._parallel_backends import LokyBackend, ThreadingBackend
 
-    from skpcd.segmentation._tile_dispatch import shares_files
+    from skpcd.segmentation.tiling._dispatch import shares_files
 
     assert shares_files(ThreadingBackend()) and shares_files(LokyBackend())
     here = {"tcp://127.0.0.1:40001": 1, "tcp://127.0.0.1:40002": 2}

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from skpcd.datasets import make_urban_objects
-from skpcd.segmentation import GROUND_PRESETS, GroundFilter
+from skpcd.segmentation import GROUND_PRESETS, GroundFilter, TileGrid
 from skpcd.segmentation import segment_scene as _segment_scene
 from skpcd.segmentation._ground import reach_cells
-from skpcd.segmentation._tiling import TileGrid, _window_filter
+from skpcd.segmentation.tiling._segment import _window_filter
 
 
 def segment_scene(*args, **kwargs):

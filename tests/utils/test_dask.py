@@ -26,9 +26,9 @@ from skpcd.features import (
 from skpcd.preprocessing import NormalEstimator
 from skpcd.utils._parallel import (
     BATCH_POINTS,
-    _chosen_backend,
     batch_bounds,
     batch_config,
+    chosen_backend,
     effective_threads,
     map_batches,
 )
@@ -303,7 +303,7 @@ def test_threading_backend_is_bit_identical(workloads, name):
 def test_process_backend_is_bit_identical(workloads, name):
     call, want, sizes = workloads[name]
     with joblib.parallel_config(backend="multiprocessing", n_jobs=2):
-        assert _chosen_backend() is not None
+        assert chosen_backend() is not None
         with batch_config(batch_points=sizes.sum() // 3 + 1):
             got = call()
     assert _same(got, want)
@@ -314,7 +314,7 @@ def test_loky_runs_in_process():
     clouds = [np.zeros((n, 3)) for n in (5, 6, 7)]
     calls = []
     with joblib.parallel_config(backend="loky", n_jobs=2):
-        assert _chosen_backend() is None
+        assert chosen_backend() is None
         map_batches(_record(calls), clouds, None, batch_points=1)
     assert len(calls) == 1
 
@@ -352,7 +352,7 @@ def _run_on_dask(client, call):
     with get_task_stream(client) as stream:
         with joblib.parallel_config(backend="dask"):
             result = call()
-    workers = [t["worker"] for t in stream.data if "_run_batch" in str(t["key"])]
+    workers = [t["worker"] for t in stream.data if "run_batch" in str(t["key"])]
     return result, workers
 
 
@@ -363,7 +363,7 @@ def test_dask_batches_use_the_cores_of_their_worker(dask_client):
         return [(n_jobs, effective_threads(None), effective_threads(8))] * len(batch)
 
     with joblib.parallel_config(backend="dask"):  # scale-out never silently off
-        assert type(_chosen_backend()).__name__ == "DaskDistributedBackend"
+        assert type(chosen_backend()).__name__ == "DaskDistributedBackend"
     got, workers = _run_on_dask(dask_client, lambda: map_batches(threads, clouds))
     # 2 workers of 1 thread on this machine: its cores shared by 2 threads
     want = max(1, joblib.cpu_count() // 2)

@@ -1,9 +1,9 @@
 """Tiled scene segmentation: the answer of the untiled one, tile by tile.
 
 :func:`segment_tiled` is the tiled :func:`~skpcd.segmentation.segment_scene`:
-the scan is cut into buffered tiles (:mod:`skpcd.segmentation._spill`,
-:mod:`skpcd.segmentation._tile_geometry`), and three passes (ground, eps,
-clusters) are mapped over them (:mod:`skpcd.segmentation._tile_dispatch`);
+the scan is cut into buffered tiles (:mod:`skpcd.segmentation.tiling._spill`,
+:mod:`skpcd.segmentation.tiling._geometry`), and three passes (ground, eps,
+clusters) are mapped over them (:mod:`skpcd.segmentation.tiling._dispatch`);
 see its docstring for why the tiled answer is the untiled one.
 """
 
@@ -25,17 +25,16 @@ from skpcd.segmentation._dbscan import (
 )
 from skpcd.segmentation._ground import GroundFilter, reach_cells
 from skpcd.segmentation._raster import minimum_raster
-from skpcd.segmentation._spill import (
-    TiledScene,
+from skpcd.segmentation.tiling._dispatch import map_tiles
+from skpcd.segmentation.tiling._geometry import held_square, reaches
+from skpcd.segmentation.tiling._spill import (
     check_chunk_size,
     detach,
     result_array,
     tile_scene,
 )
-from skpcd.segmentation._tile_dispatch import map_tiles
-from skpcd.segmentation._tile_geometry import TileGrid, held_square, reaches
 
-__all__ = ["TileGrid", "TiledScene", "segment_tiled", "tile_scene"]
+__all__ = ["segment_tiled"]
 
 
 # --- the ground filter on a window of the scene's raster -------------------

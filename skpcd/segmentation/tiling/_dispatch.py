@@ -17,13 +17,13 @@ import numpy as np
 from joblib import cpu_count, effective_n_jobs
 from sklearn.utils.parallel import Parallel, delayed
 
-from skpcd.segmentation._spill import load_tile
+from skpcd.segmentation.tiling._spill import load_tile
 from skpcd.utils._memory import heap_for_arrays, release_free_memory
 from skpcd.utils._parallel import (
-    _chosen_backend,
-    _dask_hosts,
-    _run_batch,
+    chosen_backend,
+    dask_hosts,
     effective_threads,
+    run_batch,
 )
 
 __all__ = ["map_tiles", "shares_files"]
@@ -111,7 +111,7 @@ def shares_files(backend):
     machine (a ``LocalCluster``). Any other backend gets shipped tiles."""
     if type(backend).__name__ in _LOCAL_BACKENDS:
         return True
-    hosts = _dask_hosts(backend)
+    hosts = dask_hosts(backend)
     return bool(hosts) and set(hosts) <= _local_hosts()
 
 
@@ -159,7 +159,7 @@ def map_tiles(scene, tiles, prepare, pargs, compute, cargs, n_jobs, ground=None)
         args, info = prepare(xyz, index, g, t, *pargs)
         return info, compute(*args, *cargs, n_threads)
 
-    backend = _chosen_backend()
+    backend = chosen_backend()
     if backend is None:
         for t in tiles:
             yield here(t, effective_threads(n_jobs))
@@ -167,7 +167,7 @@ def map_tiles(scene, tiles, prepare, pargs, compute, cargs, n_jobs, ground=None)
     n_tasks = max(1, int(effective_n_jobs(n_jobs)))
     inner = getattr(backend, "inner_max_num_threads", None)
     n_threads = inner or max(1, cpu_count() // n_tasks)
-    hosts = None if inner else _dask_hosts(backend)
+    hosts = None if inner else dask_hosts(backend)
     shared = [shares_files(backend)]
     if shared[0]:
         token = _scene_token(scene)
@@ -188,7 +188,7 @@ def map_tiles(scene, tiles, prepare, pargs, compute, cargs, n_jobs, ground=None)
                 del xyz, index, g
                 job = (tile, t, None, (), compute, cargs)
                 pending.append((t, info))
-            yield delayed(_run_batch)(_tile_call, job, n_threads, hosts)
+            yield delayed(run_batch)(_tile_call, job, n_threads, hosts)
 
     pre_dispatch = "2 * n_jobs" if shared[0] else "n_jobs"
     for out in Parallel(

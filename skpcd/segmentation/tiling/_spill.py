@@ -20,7 +20,7 @@ import numpy as np
 from skpcd.io._api import read_point_cloud
 from skpcd.io._chunks import file_bounds, is_path, is_streamed, iter_file_chunks
 from skpcd.segmentation._clusters import check_scene
-from skpcd.segmentation._tile_geometry import TileGrid
+from skpcd.segmentation.tiling._geometry import TileGrid
 from skpcd.utils._validation import point_bounds
 
 __all__ = [
@@ -199,7 +199,7 @@ def tile_scene(
     Examples
     --------
     >>> import numpy as np
-    >>> from skpcd.segmentation._tiling import tile_scene
+    >>> from skpcd.segmentation.tiling._segment import tile_scene
     >>> points = np.random.default_rng(0).uniform(0, 100, (1000, 3))
     >>> with tile_scene(points, 50, buffer=5) as scene:
     ...     xyz, index = scene.load(0)
