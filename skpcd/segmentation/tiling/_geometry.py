@@ -60,7 +60,7 @@ class TileGrid(typing.NamedTuple):
 
         Examples
         --------
-        >>> from skpcd.segmentation.tiling._segment import TileGrid
+        >>> from skpcd.segmentation import TileGrid
         >>> grid = TileGrid.cover([0, 0], [250, 90], 100, buffer=5)
         >>> grid.shape, grid.n_tiles
         ((3, 1), 3)

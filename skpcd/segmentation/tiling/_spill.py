@@ -199,7 +199,7 @@ def tile_scene(
     Examples
     --------
     >>> import numpy as np
-    >>> from skpcd.segmentation.tiling._segment import tile_scene
+    >>> from skpcd.segmentation import tile_scene
     >>> points = np.random.default_rng(0).uniform(0, 100, (1000, 3))
     >>> with tile_scene(points, 50, buffer=5) as scene:
     ...     xyz, index = scene.load(0)
