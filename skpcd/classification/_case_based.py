@@ -322,9 +322,10 @@ class CaseBasedClassifier(ClassifierMixin, BaseEstimator):
     correlation of the histograms (a Euclidean index over the histograms
     centred and scaled to unit length: the same order), takes
     ``n_candidates`` neighbours from it and, with a volume column, the
-    ``n_candidates`` cases of nearest volume, and re-ranks them exactly.
-    On 8000 DALES cases the exact top case was found for 99% of the
-    queries.
+    ``n_candidates`` cases of nearest volume, and re-ranks them exactly:
+    on a quarter of 200 DALES objects queried against the rest, the best
+    case is the exact one for at least 95 % of the queries (checked by the
+    test suite).
 
     References
     ----------

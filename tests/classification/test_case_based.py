@@ -364,3 +364,21 @@ def test_one_class_library_answers_the_class_or_unknown():
     assert model.decision_function(Q).shape == (4, 1)
     always = CaseBasedClassifier(threshold=None).fit(X, ["lamp"] * 12)
     assert always.predict(Q).tolist() == ["lamp"] * 4
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_centred_unit_rows_order_neighbours_as_the_correlation(seed):
+    # the approximate search's Euclidean index over these rows finds the
+    # neighbours by correlation: squared distance = 2 * (1 - r)
+    from skpcd.classification._case_based import _centred_unit_rows
+
+    rng = np.random.default_rng(seed)
+    H = np.abs(rng.normal(size=(30, 20))) * rng.integers(0, 2, size=(30, 20))
+    H[1:, 0] += 1.0  # no other row constant
+    H[0] = 3.0  # a constant row: zero, at distance 1 from every unit row
+    U = _centred_unit_rows(H).astype(np.float64)
+    d2 = ((U[:, None, :] - U[None, :, :]) ** 2).sum(-1)
+    r = np.corrcoef(H[1:])
+    assert_allclose(d2[1:, 1:], 2 * (1 - r), atol=1e-5)
+    assert_allclose(U[0], 0.0)
