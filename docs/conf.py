@@ -13,6 +13,8 @@ from docutils import nodes
 # a second compilation of every kernel for the gallery).
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+# docs/_performance.py, the extension that writes the Performance page's tables
+sys.path.insert(0, str(ROOT / "docs"))
 
 import skpcd
 from skpcd.datasets import DALES_ENV
@@ -71,6 +73,7 @@ extensions = [
     "numpydoc",
     "sphinx_gallery.gen_gallery",
     "matplotlib.sphinxext.plot_directive",
+    "_performance",
 ]
 
 templates_path = ["_templates"]
