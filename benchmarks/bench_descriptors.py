@@ -336,7 +336,7 @@ def _worker_profile(spec, clouds):
     from skpcd.features import FPFHTransformer, PFHTransformer
     from skpcd.features._pfh import _fpfh_packed, _pfh_packed
     from skpcd.neighbors._neighbors import search_packed
-    from skpcd.preprocessing._normals import _normals_f32, pack_neighborhoods
+    from skpcd.preprocessing._normals import normals_f32, pack_neighborhoods
     from skpcd.utils import check_point_clouds
 
     nj = spec["threads"]
@@ -364,7 +364,7 @@ def _worker_profile(spec, clouds):
         xyz, offsets, nb = pack_neighborhoods(cs, n_threads=nj, with_sqdist=False, **kw)
         w = tick(t, "pack + neighbour search", w)
         p = xyz.astype(np.float32)
-        n, _ = _normals_f32(p, nb, np.zeros(3), nj)
+        n, _ = normals_f32(p, nb, np.zeros(3), nj)
         w = tick(t, "normals", w)
         if spec["desc"] == "pfh":
             out = _pfh_packed(p, n, nb, 5, nj)

@@ -92,7 +92,7 @@ def _stage(name, threads):
     clouds = _dales()
     if name in ("search", "normals"):
         from skpcd.neighbors._neighbors import search_packed
-        from skpcd.preprocessing._normals import _normals_f32
+        from skpcd.preprocessing._normals import normals_f32
 
         xyz, offsets = _packed(clouds)
 
@@ -105,7 +105,7 @@ def _stage(name, threads):
             return search
         nb = search()
         p = xyz.astype(np.float32)
-        return lambda: _normals_f32(p, nb, np.zeros(3), threads)
+        return lambda: normals_f32(p, nb, np.zeros(3), threads)
     if name in ("pfh", "fpfh", "improved"):
         from skpcd.features import (
             FPFHTransformer,

@@ -7,14 +7,14 @@ import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from skpcd.features._improved_kernels import improved_rows
-from skpcd.preprocessing._normals import _normals_f32, pack_neighborhoods
+from skpcd.preprocessing._normals import normals_f32, pack_neighborhoods
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
 from skpcd.utils._parallel import parallel_rows
 from skpcd.utils._validation import (
     NORMALS_OPTIONS,
-    _check_given_normals,
-    _has_normal_columns,
+    check_given_normals,
+    has_normal_columns,
     local_frame,
 )
 
@@ -191,7 +191,7 @@ class ImprovedPFHTransformer(CloudTransformer):
             for name in ("n_neighbors", "radius")
             if getattr(self, name) is not None
         ]
-        _check_given_normals(clouds, self.normals, estimation=estimation)
+        check_given_normals(clouds, self.normals, estimation=estimation)
         return clouds
 
     def _fit_clouds(self, X):
@@ -220,7 +220,7 @@ class ImprovedPFHTransformer(CloudTransformer):
 
     def _transform_batch(self, clouds, n_threads):
         """:meth:`transform` of validated clouds (one batch of them)."""
-        given = [_has_normal_columns(c, self.normals) for c in clouds]
+        given = [has_normal_columns(c, self.normals) for c in clouds]
         offsets = np.zeros(len(clouds) + 1, dtype=np.int64)
         np.cumsum([len(c) for c in clouds], out=offsets[1:])
         if all(given):  # no search
@@ -237,7 +237,7 @@ class ImprovedPFHTransformer(CloudTransformer):
             )  # fmt: skip
             # no PCL rounding to keep: every axis relative to the minimum
             p, _ = local_frame(xyz, offsets, keep_within=0)
-            n = _normals_f32(p, nb, np.zeros(3), n_threads)[0]  # signs unused
+            n = normals_f32(p, nb, np.zeros(3), n_threads)[0]  # signs unused
             del nb
             for i in np.flatnonzero(given):  # "auto" on a mixed batch
                 n[offsets[i] : offsets[i + 1]] = clouds[i][:, 3:6]

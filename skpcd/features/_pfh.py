@@ -31,10 +31,10 @@ from skpcd.neighbors._neighbors import (
 )
 from skpcd.preprocessing._normals import (
     CLOUD_VIEWPOINT,
-    _check_viewpoint,
-    _normals_f32,
     ball_block_normals,
+    check_viewpoint,
     local_viewpoints,
+    normals_f32,
     pack_neighborhoods,
 )
 from skpcd.utils import check_point_clouds
@@ -44,11 +44,11 @@ from skpcd.utils._memory import release_free_memory, unshared_zeros
 from skpcd.utils._parallel import effective_threads, map_batches, parallel_rows
 from skpcd.utils._validation import (
     NORMALS_OPTIONS,
-    _check_given_normals,
-    _check_unit_normals,
-    _has_normal_columns,
     check_extents,
+    check_given_normals,
+    check_unit_normals,
     cloud_bounds,
+    has_normal_columns,
     local_frame,
     max_extent,
 )
@@ -65,7 +65,7 @@ def _as_f32(points, normals, neighborhoods):
     n = np.ascontiguousarray(normals, dtype=np.float32)
     if n.shape != p.shape:
         raise ValueError(f"normals must have shape {p.shape}, got {n.shape}")
-    _check_unit_normals(n)
+    check_unit_normals(n)
     if not isinstance(neighborhoods, Neighborhoods):
         raise TypeError("neighborhoods must come from compute_neighborhoods")
     if neighborhoods.n_points != len(p):
@@ -454,7 +454,7 @@ class _LocalDescriptor(CloudTransformer):
             )
         if self.normal_n_neighbors is not None and self.normal_radius is not None:
             raise ValueError("give normal_n_neighbors or normal_radius, not both")
-        _check_viewpoint(self.viewpoint)
+        check_viewpoint(self.viewpoint)
 
     @property
     def _bounded_batches(self):
@@ -468,7 +468,7 @@ class _LocalDescriptor(CloudTransformer):
         for i, c in enumerate(clouds):
             if not np.isfinite(c[:, :3]).all():
                 raise ValueError(f"X[{i}] has NaN or infinite coordinates.")
-        _check_given_normals(clouds, self.normals, estimation=self._estimation_set())
+        check_given_normals(clouds, self.normals, estimation=self._estimation_set())
         return clouds
 
     def _estimation_set(self):
@@ -478,7 +478,7 @@ class _LocalDescriptor(CloudTransformer):
             for name in ("normal_n_neighbors", "normal_radius")
             if getattr(self, name) is not None
         ]
-        if not isinstance(_check_viewpoint(self.viewpoint), str):
+        if not isinstance(check_viewpoint(self.viewpoint), str):
             names.append("viewpoint")
         return names
 
@@ -486,7 +486,7 @@ class _LocalDescriptor(CloudTransformer):
         """The normals given in the clouds' columns 3-5, packed as float32,
         and the mask of the points that have them (NaN rows elsewhere);
         ``(None, None)`` when every cloud's normals are to be estimated."""
-        given = [_has_normal_columns(c, self.normals) for c in clouds]
+        given = [has_normal_columns(c, self.normals) for c in clouds]
         if not any(given):
             return None, None
         if all(given):
@@ -539,9 +539,9 @@ class _LocalDescriptor(CloudTransformer):
                 if order is not None:
                     nnb = nnb.renumbered(order, n_threads)
             vp = local_viewpoints(
-                _check_viewpoint(self.viewpoint), xyz, offsets, origins
+                check_viewpoint(self.viewpoint), xyz, offsets, origins
             )
-            n = _normals_f32(p, nnb, vp, n_threads, offsets)[0]
+            n = normals_f32(p, nnb, vp, n_threads, offsets)[0]
             del nnb
             if given is not None:  # "auto" on clouds with and without normals
                 n[mask] = given[mask]
@@ -822,7 +822,7 @@ class PFHTransformer(_LocalDescriptor):
             return super()._compute(clouds, n_threads, out)
         # radius search: neighbourhoods block by block (memory)
         given = self._given_normals(clouds)
-        vp = _check_viewpoint(self.viewpoint)
+        vp = check_viewpoint(self.viewpoint)
         args = (float(self.radius), int(self.n_bins), given, vp, n_threads)
         return _pfh_radius_blocked(clouds, *args, out)
 

@@ -483,7 +483,7 @@ def ball_cells(lo, hi, grid, r2, indptr, counts, indices, sqdist):
     otherwise fills ``indices`` and ``sqdist`` (unless empty), each row
     sorted by (distance, index), the point first.
     """
-    _ball(
+    ball(
         lo, hi, grid, r2, indptr, counts, indices, sqdist, -1, True,
         _no_sink, (), False,
     )  # fmt: skip
@@ -497,7 +497,7 @@ def ball_cells_local(lo, hi, base, grid, r2, indptr, counts, indices, sort):
     block of cells gets its own small neighbourhood arrays. With ``indptr``
     empty, only the counts. Rows are sorted only with ``sort``."""
     sqdist = indices[:0].astype(np.float32)
-    _ball(
+    ball(
         lo, hi, grid, r2, indptr, counts, indices, sqdist, base, sort,
         _no_sink, (), False,
     )  # fmt: skip
@@ -509,7 +509,7 @@ def _no_sink(args, row, i, c, bi, bd, m):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _ball(
+def ball(
     lo, hi, grid, r2, indptr, counts, indices, sqdist, base, sort, sink, sink_args,
     with_sink,
 ):  # fmt: skip

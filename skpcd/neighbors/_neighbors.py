@@ -179,7 +179,24 @@ def scattered(nb, n_rows=4096):
     return bool(np.mean(gap > _NEAR) > _FAR_SHARE)
 
 
-def _check_points(points):
+def check_points(points):
+    """One cloud as a float64 C-contiguous ``(n_points, 3)`` array of its xyz.
+
+    Parameters
+    ----------
+    points : array-like of shape (n_points, 3+)
+        The cloud; columns beyond the third are dropped.
+
+    Returns
+    -------
+    xyz : ndarray of shape (n_points, 3), float64
+
+    Raises
+    ------
+    ValueError
+        If ``points`` is not 2-D with 3 or more columns, or has a NaN or
+        infinite coordinate.
+    """
     points = np.asarray(points)
     if points.ndim != 2 or points.shape[1] < 3:
         raise ValueError(f"points must have shape (n_points, 3+), got {points.shape}")
@@ -239,7 +256,7 @@ def compute_neighborhoods(
     >>> nb.indices.reshape(4, 2).tolist()
     [[0, 1], [1, 0], [2, 1], [3, 2]]
     """
-    xyz = _check_points(points)
+    xyz = check_points(points)
     return search_packed(
         xyz,
         np.array([0, len(xyz)], dtype=np.int64),

@@ -24,7 +24,7 @@ __all__ = ["NormalEstimator", "estimate_normals"]
 CLOUD_VIEWPOINT = "corner"
 
 
-def _check_viewpoint(viewpoint):
+def check_viewpoint(viewpoint):
     """``CLOUD_VIEWPOINT`` or 3 finite numbers as a float64 array."""
     if isinstance(viewpoint, str):
         if viewpoint != CLOUD_VIEWPOINT:
@@ -59,7 +59,7 @@ def local_viewpoints(viewpoint, xyz, cloud_ptr, origins):
     Parameters
     ----------
     viewpoint : "corner" or ndarray of shape (3,)
-        As checked by ``_check_viewpoint``.
+        As checked by ``check_viewpoint``.
     xyz : ndarray of shape (n_points, 3), float64
         The packed clouds, in their own coordinates.
     cloud_ptr : ndarray of shape (n_clouds + 1,), int64
@@ -154,7 +154,7 @@ def estimate_normals(
     xyz = np.ascontiguousarray(np.asarray(points, dtype=np.float64)[:, :3])
     if xyz.ndim != 2 or not np.isfinite(xyz).all():
         raise ValueError("points must be a finite array of shape (n_points, 3+)")
-    vp = _check_viewpoint(viewpoint)
+    vp = check_viewpoint(viewpoint)
     n_threads = effective_threads(n_jobs)
     if neighborhoods is None:
         neighborhoods = compute_neighborhoods(
@@ -178,11 +178,11 @@ def _normals_packed(xyz, offsets, neighborhoods, viewpoint, n_threads):
     indices), each cloud in its local frame."""
     p, origins = local_frame(xyz, offsets)
     vp = local_viewpoints(viewpoint, xyz, offsets, origins)
-    normals, curvature = _normals_f32(p, neighborhoods, vp, n_threads, offsets)
+    normals, curvature = normals_f32(p, neighborhoods, vp, n_threads, offsets)
     return normals.astype(np.float64), curvature.astype(np.float64)
 
 
-def _normals_f32(points, neighborhoods, viewpoint, n_threads, cloud_ptr=None):
+def normals_f32(points, neighborhoods, viewpoint, n_threads, cloud_ptr=None):
     """Normals and curvature, float32, of float32 packed points.
 
     ``points`` are in their clouds' local frames
@@ -293,7 +293,7 @@ class NormalEstimator(CloudTransformer):
 
     def _validate(self, X):
         clouds = check_point_clouds(X)
-        _check_viewpoint(self.viewpoint)
+        check_viewpoint(self.viewpoint)
         return clouds
 
     def transform(self, X):
@@ -315,7 +315,7 @@ class NormalEstimator(CloudTransformer):
 
     def _transform_batch(self, clouds, n_threads):
         """:meth:`transform` of validated clouds (one batch of them)."""
-        vp = _check_viewpoint(self.viewpoint)
+        vp = check_viewpoint(self.viewpoint)
         xyz, offsets, neighborhoods = pack_neighborhoods(
             clouds,
             n_neighbors=self.n_neighbors,

@@ -16,7 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
-from skpcd.neighbors._grid_kernels import _ball
+from skpcd.neighbors._grid_kernels import ball
 from skpcd.utils._numba import borrow, keep
 
 F0 = np.float32(0.0)
@@ -206,7 +206,7 @@ def ball_normals(
         borrow(ends_own),
     )  # fmt: skip
     none = np.empty(0, dtype=np.int64)
-    _ball(
+    ball(
         lo, hi, grid, r2, none, counts, none[:0].astype(np.int32),
         none[:0].astype(np.float32), base, True, _normal_sink, args, True,
     )  # fmt: skip

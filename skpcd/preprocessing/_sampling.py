@@ -8,7 +8,7 @@ import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from skpcd.neighbors._grid import argsort_keys
-from skpcd.neighbors._neighbors import _check_points
+from skpcd.neighbors._neighbors import check_points
 from skpcd.preprocessing import _sampling_kernels as k
 from skpcd.preprocessing._spacing import point_spacing
 from skpcd.utils import check_point_clouds
@@ -147,7 +147,7 @@ def grid_sample(points, voxel_size="auto", *, return_index=False, n_jobs=None):
     [[0.5, 0.5, 0.5], [1.5, 0.5, 0.5]]
     """
     points = np.asarray(points)
-    xyz = _check_points(points)
+    xyz = check_points(points)
     n_threads = effective_threads(n_jobs)
     h = _voxel_size(xyz, voxel_size, n_threads)
     index = _grid_sample_indices(xyz, h, n_threads)

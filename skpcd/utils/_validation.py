@@ -316,14 +316,14 @@ def local_frame(
     return local, origins
 
 
-def _has_normal_columns(cloud, normals):
+def has_normal_columns(cloud, normals):
     """Whether ``normals`` takes the normals of ``cloud`` from its columns 3-5."""
     if normals == "estimate":
         return False
     return normals == "columns" or cloud.shape[1] >= 6
 
 
-def _check_unit_normals(normals, *, input_name="normals", columns="", hint=""):
+def check_unit_normals(normals, *, input_name="normals", columns="", hint=""):
     """Check that normals are unit vectors; a row with a NaN is undefined.
 
     Given normals are used as they are, as PCL's ``setInputNormals`` uses
@@ -371,7 +371,7 @@ def _check_unit_normals(normals, *, input_name="normals", columns="", hint=""):
     return undefined
 
 
-def _check_given_normals(clouds, normals, *, estimation=(), input_name="X"):
+def check_given_normals(clouds, normals, *, estimation=(), input_name="X"):
     """Which clouds carry their normals in columns 3-5, those normals checked.
 
     Parameters
@@ -402,7 +402,7 @@ def _check_given_normals(clouds, normals, *, estimation=(), input_name="X"):
                 f"{where} has {c.shape[1]} columns; normals='columns' reads the "
                 "normals from columns 3-5."
             )
-        has = _has_normal_columns(c, normals)
+        has = has_normal_columns(c, normals)
         if has and estimation:
             names = " and ".join(estimation)
             raise ValueError(
@@ -412,7 +412,7 @@ def _check_given_normals(clouds, normals, *, estimation=(), input_name="X"):
                 f"normals instead, or leave {names} at the default."
             )
         if has:
-            _check_unit_normals(
+            check_unit_normals(
                 c[:, 3:6],
                 input_name=where,
                 columns=" (columns 3-5)",

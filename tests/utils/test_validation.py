@@ -86,41 +86,41 @@ def test_strings_rejected():
 
 
 def test_unit_normals_checked_nan_rows_undefined():
-    from skpcd.utils._validation import NORMAL_ATOL, _check_unit_normals
+    from skpcd.utils._validation import NORMAL_ATOL, check_unit_normals
 
     n = np.tile([0.0, 0.6, 0.8], (6, 1))
     n[1] = np.nan
     n[2, 0] = np.nan  # one NaN component: undefined too
     n[3] *= 1 + 0.9 * NORMAL_ATOL  # within the tolerance
-    assert _check_unit_normals(n).tolist() == [0, 1, 1, 0, 0, 0]
+    assert check_unit_normals(n).tolist() == [0, 1, 1, 0, 0, 0]
     n[4] *= 1 + 1.1 * NORMAL_ATOL
     n[5] = [np.inf, 0, 0]
     with pytest.raises(ValueError, match=r"^normals: 2 of 6 normals are not unit"):
-        _check_unit_normals(n)
+        check_unit_normals(n)
     with pytest.raises(ValueError, match=r"row 4, norm 1\.0011.*NaN where"):
-        _check_unit_normals(n)
+        check_unit_normals(n)
     with pytest.raises(ValueError, match=r"row 0, norm 0\b"):
-        _check_unit_normals(np.zeros((1, 3)))
+        check_unit_normals(np.zeros((1, 3)))
 
 
 def test_given_normals_by_cloud():
-    from skpcd.utils._validation import _check_given_normals
+    from skpcd.utils._validation import check_given_normals
 
     up = np.c_[np.zeros((4, 3)), np.tile([0.0, 0.0, 1.0], (4, 1))]
     clouds = [np.zeros((4, 3)), np.zeros((4, 5)), up, np.c_[up, np.ones(4)]]
-    assert _check_given_normals(clouds, "auto") == [False, False, True, True]
-    assert _check_given_normals(clouds, "estimate") == [False] * 4
-    assert _check_given_normals(clouds[2:], "columns") == [True, True]
+    assert check_given_normals(clouds, "auto") == [False, False, True, True]
+    assert check_given_normals(clouds, "estimate") == [False] * 4
+    assert check_given_normals(clouds[2:], "columns") == [True, True]
     with pytest.raises(ValueError, match=r"X\[0\] has 5 columns; normals='columns'"):
-        _check_given_normals(clouds[1:], "columns")
+        check_given_normals(clouds[1:], "columns")
     bad = up.copy()
     bad[2, 5] = 3.0
     with pytest.raises(ValueError, match=r"X\[1\]: 1 of 4 normals \(columns 3-5\)"):
-        _check_given_normals([up, bad], "auto")
-    assert _check_given_normals([up, bad], "estimate") == [False, False]
+        check_given_normals([up, bad], "auto")
+    assert check_given_normals([up, bad], "estimate") == [False, False]
     with pytest.raises(ValueError, match=r"X\[0\] has normals .* k and r only set"):
-        _check_given_normals([up], "auto", estimation=["k", "r"])
-    assert _check_given_normals([clouds[0]], "auto", estimation=["k"]) == [False]
+        check_given_normals([up], "auto", estimation=["k", "r"])
+    assert check_given_normals([clouds[0]], "auto", estimation=["k"]) == [False]
 
 
 def test_local_frame_keeps_coordinates_within_1024_and_moves_the_others():
