@@ -6,6 +6,7 @@ from numbers import Integral, Real
 import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
 
+from skpcd.features._descriptor import FeatureNamesMixin, numbered
 from skpcd.features._improved_kernels import improved_rows
 from skpcd.preprocessing._normals import normals_f32, pack_neighborhoods
 from skpcd.utils import check_point_clouds
@@ -23,7 +24,7 @@ __all__ = ["ImprovedPFHTransformer"]
 MIDDLES = ("centroid", "bbox_center")
 
 
-class ImprovedPFHTransformer(CloudTransformer):
+class ImprovedPFHTransformer(FeatureNamesMixin, CloudTransformer):
     """Improved PFH (or FPFH) of each segment, with a feature-level normal.
 
     Wang et al. (2023), section 3.3: the classic PFH of a smooth surface
@@ -257,18 +258,5 @@ class ImprovedPFHTransformer(CloudTransformer):
         out[~defined] = np.nan if self.undefined == "nan" else 0.0
         return out
 
-    def get_feature_names_out(self, input_features=None):
-        """Names of the output columns: ``improved_pfh0``, ``improved_pfh1``...
-
-        Parameters
-        ----------
-        input_features : None
-            Ignored.
-
-        Returns
-        -------
-        names : ndarray of str
-            One name per bin.
-        """
-        prefix = f"improved_{self.variant}"
-        return np.asarray([f"{prefix}{i}" for i in range(self._width())], dtype=object)
+    def _feature_names(self):
+        return numbered(f"improved_{self.variant}", self._width())

@@ -6,12 +6,7 @@ from numbers import Real
 import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
 
-from skpcd.utils._estimator import CloudTransformer
-from skpcd.utils._validation import check_extents
-
-# Extents up to this keep every size finite in float64 (a volume is the
-# product of three sides, an area of two): larger ones are refused.
-MAX_SIZE_EXTENT = 1e100
+from skpcd.features._descriptor import SegmentDescriptor
 
 __all__ = ["OverallDescriptor", "box_dimensions"]
 
@@ -73,20 +68,7 @@ def box_dimensions(xyz, box="aabb"):
     return float(ext.max()), float(ext.min()), float(xyz[:, 2].max())
 
 
-def _check_size_extents(clouds, input_name="X"):
-    """Refuse clouds whose sizes (area, volume) would overflow float64."""
-    lo = np.array([c[:, :3].min(axis=0) for c in clouds], dtype=np.float64)
-    hi = np.array([c[:, :3].max(axis=0) for c in clouds], dtype=np.float64)
-    check_extents(
-        lo.reshape(-1, 3),
-        hi.reshape(-1, 3),
-        MAX_SIZE_EXTENT,
-        input_name=input_name,
-        what="its box volume and shape features (float64)",
-    )
-
-
-class OverallDescriptor(CloudTransformer):
+class OverallDescriptor(SegmentDescriptor):
     """The overall descriptor of each segment (Wang et al., 2023, section 3.4).
 
     Per segment: its extent (minimum and maximum x, y, z), the length, width
@@ -147,26 +129,6 @@ class OverallDescriptor(CloudTransformer):
         self.box = box
         self.min_extent = min_extent
 
-    def transform(self, X):
-        """The overall descriptor of every segment.
-
-        Parameters
-        ----------
-        X : sequence of ndarray of shape (n_points_i, 3+)
-            The segments, at least one point each.
-
-        Returns
-        -------
-        descriptor : ndarray of shape (n_segments, 12)
-            Columns named by :meth:`get_feature_names_out`.
-        """
-        return super().transform(X)
-
-    def _validate(self, X):
-        clouds = super()._validate(X)
-        _check_size_extents(clouds)
-        return clouds
-
     def _transform_batch(self, clouds, n_threads):
         """:meth:`transform` of validated clouds (one batch of them)."""
         rows = np.empty((len(clouds), len(OVERALL_NAMES)))
@@ -181,18 +143,5 @@ class OverallDescriptor(CloudTransformer):
             rows[r, 11] = len(xyz) / volume if volume > 0 else np.inf
         return rows
 
-    def get_feature_names_out(self, input_features=None):
-        """Names of the output columns.
-
-        Parameters
-        ----------
-        input_features : None
-            Ignored.
-
-        Returns
-        -------
-        names : ndarray of str
-            ``min_x, min_y, min_z, max_x, max_y, max_z, length, width,
-            height, volume, n_points, density``.
-        """
-        return np.asarray(OVERALL_NAMES, dtype=object)
+    def _feature_names(self):
+        return OVERALL_NAMES

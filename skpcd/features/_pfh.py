@@ -14,6 +14,7 @@ from queue import SimpleQueue
 import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
 
+from skpcd.features._descriptor import FeatureNamesMixin, numbered
 from skpcd.features._pfh_kernels import (
     ROW_MIN,
     fpfh_rows,
@@ -421,7 +422,7 @@ def compute_fpfh(
     return _fpfh_packed(p, n, nb, int(n_bins), convention, n_threads)
 
 
-class _LocalDescriptor(CloudTransformer):
+class _LocalDescriptor(FeatureNamesMixin, CloudTransformer):
     """Shared machinery of the per-point histogram transformers."""
 
     _parameter_constraints: typing.ClassVar[dict] = {
@@ -653,26 +654,10 @@ class _LocalDescriptor(CloudTransformer):
             rows.append(block)
         return rows
 
-    def get_feature_names_out(self, input_features=None):
-        """Names of the descriptor columns, ``pfh0``... or ``fpfh0``...
-
-        With ``pooling``, these name the columns of the one row per cloud
-        (so the transformer composes in a
-        :class:`~sklearn.pipeline.FeatureUnion`); without, the columns of
-        every per-point array.
-
-        Parameters
-        ----------
-        input_features : None
-            Ignored.
-
-        Returns
-        -------
-        names : ndarray of str
-            One name per bin.
-        """
+    def _feature_names(self):
+        # pfh0, pfh1... or fpfh0, fpfh1...
         prefix = type(self).__name__.removesuffix("Transformer").lower()
-        return np.asarray([f"{prefix}{i}" for i in range(self._width())], dtype=object)
+        return numbered(prefix, self._width())
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()

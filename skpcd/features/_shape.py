@@ -4,8 +4,8 @@ import typing
 
 import numpy as np
 
-from skpcd.features._overall import _check_size_extents, box_dimensions
-from skpcd.utils._estimator import CloudTransformer
+from skpcd.features._descriptor import SegmentDescriptor, check_size_extents
+from skpcd.features._overall import box_dimensions
 
 __all__ = ["ShapeFeatures", "shape_features"]
 
@@ -57,7 +57,7 @@ def shape_features(points):
     """
     xyz = np.asarray(points, dtype=np.float64)[:, :3]
     n = len(xyz)
-    _check_size_extents([xyz], input_name="points")
+    check_size_extents([xyz], input_name="points")
     # relative to the lower corner (exact far from the origin): nothing
     # below depends on where the segment lies
     xyz = xyz - xyz.min(axis=0)
@@ -120,7 +120,7 @@ def shape_features(points):
     )
 
 
-class ShapeFeatures(CloudTransformer):
+class ShapeFeatures(SegmentDescriptor):
     """Global shape features of each segment (size, eigenvalues, height profile).
 
     A fixed-length description of a whole segment that needs no
@@ -179,41 +179,9 @@ class ShapeFeatures(CloudTransformer):
     def __init__(self):
         pass
 
-    def transform(self, X):
-        """Compute the features of each segment.
-
-        Parameters
-        ----------
-        X : sequence of ndarray of shape (n_points_i, 3+)
-            The segments, at least one point each.
-
-        Returns
-        -------
-        features : ndarray of shape (n_segments, 18)
-            One row per segment.
-        """
-        return super().transform(X)
-
-    def _validate(self, X):
-        clouds = super()._validate(X)
-        _check_size_extents(clouds)
-        return clouds
-
     def _transform_batch(self, clouds, n_threads):
         """The features of a batch of clouds, one row each."""
         return np.vstack([shape_features(c) for c in clouds])
 
-    def get_feature_names_out(self, input_features=None):
-        """Names of the output features.
-
-        Parameters
-        ----------
-        input_features : None
-            Ignored.
-
-        Returns
-        -------
-        names : ndarray of str
-            The feature names.
-        """
-        return np.asarray(FEATURE_NAMES, dtype=object)
+    def _feature_names(self):
+        return FEATURE_NAMES

@@ -6,9 +6,8 @@ import typing
 import numpy as np
 from sklearn.utils._param_validation import Interval
 
-from skpcd.features._overall import _check_size_extents
+from skpcd.features._descriptor import SegmentDescriptor, check_size_extents
 from skpcd.features._vertical_kernels import geometric_median
-from skpcd.utils._estimator import CloudTransformer
 
 __all__ = ["VerticalProfile", "vertical_features"]
 
@@ -147,7 +146,7 @@ def vertical_features(points, *, n_slices=10):
     6.0
     """
     xyz = np.asarray(points, dtype=np.float64)[:, :3]
-    _check_size_extents([xyz], input_name="points")
+    check_size_extents([xyz], input_name="points")
     # relative to the lower corner, in float64: exact far from the origin
     xyz = xyz - xyz.min(axis=0)
     x, y, z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
@@ -230,7 +229,7 @@ def vertical_features(points, *, n_slices=10):
     )
 
 
-class VerticalProfile(CloudTransformer):
+class VerticalProfile(SegmentDescriptor):
     """Descriptors of the vertical structure of each segment.
 
     Pole-like street furniture (street lights, traffic lights and signs,
@@ -334,42 +333,10 @@ class VerticalProfile(CloudTransformer):
     def __init__(self, *, n_slices=10):
         self.n_slices = n_slices
 
-    def transform(self, X):
-        """Compute the features of each segment.
-
-        Parameters
-        ----------
-        X : sequence of ndarray of shape (n_points_i, 3+)
-            The segments, at least one point each.
-
-        Returns
-        -------
-        features : ndarray of shape (n_segments, 26 + 4 * n_slices)
-            One row per segment.
-        """
-        return super().transform(X)
-
-    def _validate(self, X):
-        clouds = super()._validate(X)
-        _check_size_extents(clouds)
-        return clouds
-
     def _transform_batch(self, clouds, n_threads):
         """:meth:`transform` of validated clouds (one batch of them)."""
         n_slices = int(self.n_slices)
         return np.vstack([vertical_features(c, n_slices=n_slices) for c in clouds])
 
-    def get_feature_names_out(self, input_features=None):
-        """Names of the output features.
-
-        Parameters
-        ----------
-        input_features : None
-            Ignored.
-
-        Returns
-        -------
-        names : ndarray of str
-            The feature names.
-        """
-        return np.asarray(_feature_names(int(self.n_slices)), dtype=object)
+    def _feature_names(self):
+        return _feature_names(int(self.n_slices))
