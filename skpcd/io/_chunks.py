@@ -11,8 +11,8 @@ import os
 from pathlib import Path
 
 from skpcd.io._api import read_point_cloud
-from skpcd.io._las import iter_points, read_las_extent
-from skpcd.io._ply import _group
+from skpcd.io._common import group_fields
+from skpcd.io._las_reader import iter_points, read_las_extent
 
 __all__ = ["file_bounds", "is_path", "is_streamed", "iter_file_chunks"]
 
@@ -40,7 +40,7 @@ def iter_file_chunks(path, chunk_size, *, fields=None):
             n for n in read_las_extent(path).dimensions if n not in ("X", "Y", "Z")
         ]
         for xyz, extras in iter_points(path, chunk_size=chunk_size, fields=names):
-            yield xyz, _group(extras)[0]
+            yield xyz, group_fields(extras)[0]
         return
     # not out of core: no chunked reader for this format
     if not fields:

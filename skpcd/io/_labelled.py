@@ -12,15 +12,17 @@ in the docstring of :func:`write_labelled_scan`.
 import json
 import os
 import warnings
-from numbers import Integral
 from pathlib import Path
 
 import numpy as np
 
 from skpcd.exceptions import MissingFileError, NonFiniteWarning, PointCloudFileError
-from skpcd.io import _las
 from skpcd.io._api import SUPPORTED_EXTENSIONS, read_point_cloud, write_point_cloud
 from skpcd.io._atomic import atomic_path
+from skpcd.io._common import check_chunk_size
+from skpcd.io._las_reader import checked_chunks, open_checked, read_vlr_records
+from skpcd.io._las_structure import decoding, import_laspy
+from skpcd.io._las_writer import write as write_las
 
 __all__ = ["read_class_names", "write_labelled_scan"]
 
@@ -291,16 +293,16 @@ def _written(score_name, has_ground):
 
 
 def _stream_las(source, output, arrays, class_names, score_name, keep_fields, chunk):
-    laspy = _las._laspy()
+    laspy = import_laspy()
     has_ground = arrays["ground"] is not None
-    with _las.open_checked(laspy, source) as (reader, n_points):
+    with open_checked(laspy, source) as (reader, n_points):
         _check_lengths(source, n_points, arrays)
         standard = set(reader.header.point_format.standard_dimension_names)
         if score_name in standard:
             raise ValueError(
                 f"score_name {score_name!r} is a standard LAS dimension; pick another"
             )
-        with _las._decoding(source):  # laspy's parsing of the source's header
+        with decoding(source):  # laspy's parsing of the source's header
             header = reader.header.copy()
             ours = _written(score_name, has_ground)
             extra = list(header.point_format.extra_dimension_names)
@@ -323,7 +325,7 @@ def _stream_las(source, output, arrays, class_names, score_name, keep_fields, ch
             ) as writer:
                 stats = _ExtraStats(writer.header)
                 start = 0
-                for points in _las.checked_chunks(reader, source, chunk, n_points):
+                for points in checked_chunks(reader, source, chunk, n_points):
                     stop = start + len(points)
                     values = _chunk_values(arrays, start, stop, n_classes)
                     record = laspy.ScaleAwarePointRecord.zeros(
@@ -410,7 +412,7 @@ def _spread(values, finite):
 def _write_las_memory(output, points, fields, values, class_names, score_name):
     """A LAS/LAZ output from a source of another format: skpcd's own LAS
     layout (see :mod:`skpcd.io._las`) with the labelled dimensions."""
-    laspy = _las._laspy()
+    laspy = import_laspy()
     has_ground = "ground" in values
     out = {c: points[:, j] for j, c in enumerate("xyz")}
     out.update(fields)
@@ -428,7 +430,7 @@ def _write_las_memory(output, points, fields, values, class_names, score_name):
         out["ground"] = values["ground"].astype(np.uint8)
     dims = {p.name: p for p in _new_dims(laspy, score_name, has_ground)}
     with atomic_path(output, overwrite=True) as tmp:
-        _las.write(
+        write_las(
             tmp,
             out,
             extra_params=dims,
@@ -563,12 +565,7 @@ def write_labelled_scan(
     >>> read_class_names(out)
     {64: 'car', 65: 'tree'}
     """
-    if (
-        isinstance(chunk_size, bool)
-        or not isinstance(chunk_size, Integral)
-        or chunk_size < 1
-    ):
-        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    check_chunk_size(chunk_size)
     class_names = [str(c) for c in class_names]
     source, output = _check_paths(source, output, overwrite)
     if _is_las(output) and len(class_names) > MAX_CLASSES:
@@ -615,7 +612,7 @@ def read_class_names(path):
         If it is not a readable LAS/LAZ file, or its skpcd VLR is corrupt.
     """
     path = Path(os.fspath(path))
-    records = _las.read_vlr_records(path)
+    records = read_vlr_records(path)
     for user_id, record_id, data in records:
         if (user_id, record_id) == (SKPCD_USER_ID, SKPCD_RECORD_ID):
             try:

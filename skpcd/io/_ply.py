@@ -31,13 +31,18 @@ type); booleans become ``uchar``.
 """
 
 import mmap
-import re
 
 import numba
 import numpy as np
 
 from skpcd.exceptions import PointCloudFileError
-from skpcd.io._common import ascii_rows, float_format, header_line, is_float32_exact
+from skpcd.io._common import (
+    ascii_rows,
+    float_format,
+    group_fields,
+    header_line,
+    is_float32_exact,
+)
 
 _TYPES = {
     "char": "i1",
@@ -75,7 +80,6 @@ _ENCODINGS = {
 }
 _ORDER = {"binary_little_endian": "<", "binary_big_endian": ">"}
 _MAX_HEADER_LINES = 10000
-_GROUPED = re.compile(r"(.+)_0")
 
 
 class _Element:
@@ -354,32 +358,6 @@ def _read_ascii(path, data, start, elements, vertex):
     return fields
 
 
-def _group(fields):
-    """Merge runs ``name_0 ... name_{c-1}`` of one dtype into ``(n, c)`` fields."""
-    names = list(fields)
-    out, grouped = {}, {}
-    i = 0
-    while i < len(names):
-        match = _GROUPED.fullmatch(names[i])
-        if match:
-            base = match.group(1)
-            j = i + 1
-            while (
-                j < len(names)
-                and names[j] == f"{base}_{j - i}"
-                and fields[names[j]].dtype == fields[names[i]].dtype
-            ):
-                j += 1
-            if j - i >= 2 and base not in fields and base not in out:
-                out[base] = np.column_stack([fields[m] for m in names[i:j]])
-                grouped[base] = names[i:j]
-                i = j
-                continue
-        out[names[i]] = fields[names[i]]
-        i += 1
-    return out, grouped
-
-
 def read(path):
     """Read the vertices of a PLY file into ``(fields, info)``.
 
@@ -420,7 +398,7 @@ def read(path):
         fields = _read_ascii(path, data, start, elements, vertex)
     else:
         fields = _read_binary(path, data, start, elements, vertex, _ORDER[fmt])
-    fields, grouped = _group(fields)
+    fields, grouped = group_fields(fields)
     info = {
         "encoding": fmt,
         "version": version,
