@@ -11,12 +11,12 @@ from skpcd.features._improved_kernels import improved_rows
 from skpcd.preprocessing._normals import normals_f32, pack_neighborhoods
 from skpcd.utils import check_point_clouds
 from skpcd.utils._estimator import CloudTransformer
+from skpcd.utils._geometry import local_frame
 from skpcd.utils._parallel import parallel_rows
 from skpcd.utils._validation import (
     NORMALS_OPTIONS,
     check_given_normals,
     has_normal_columns,
-    local_frame,
 )
 
 __all__ = ["ImprovedPFHTransformer"]

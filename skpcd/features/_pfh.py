@@ -41,6 +41,7 @@ from skpcd.preprocessing._normals import (
 from skpcd.utils import check_point_clouds
 from skpcd.utils._compile import entry_point
 from skpcd.utils._estimator import CloudTransformer
+from skpcd.utils._geometry import cloud_bounds, local_frame, max_extent
 from skpcd.utils._memory import release_free_memory, unshared_zeros
 from skpcd.utils._parallel import effective_threads, map_batches, parallel_rows
 from skpcd.utils._validation import (
@@ -48,10 +49,7 @@ from skpcd.utils._validation import (
     check_extents,
     check_given_normals,
     check_unit_normals,
-    cloud_bounds,
     has_normal_columns,
-    local_frame,
-    max_extent,
 )
 
 __all__ = ["FPFHTransformer", "PFHTransformer", "compute_fpfh", "compute_pfh"]

@@ -21,8 +21,8 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from skpcd.neighbors import _grid_kernels as g
+from skpcd.utils._geometry import cloud_bounds
 from skpcd.utils._parallel import parallel_rows, parallel_section
-from skpcd.utils._validation import cloud_bounds
 
 __all__ = [
     "BLOCK_CHUNK",
@@ -198,7 +198,7 @@ def build_grid(xyz, cloud_ptr, h, lo_hi=None, n_threads=1):
     h : ndarray of shape (n_clouds,)
         Smallest cell size of each cloud.
     lo_hi : tuple of ndarray, default=None
-        The clouds' bounds (:func:`~skpcd.utils._validation.cloud_bounds`),
+        The clouds' bounds (:func:`~skpcd.utils._geometry.cloud_bounds`),
         if already known.
     n_threads : int, default=1
         Threads for the keys, the sort and the copy of the points.

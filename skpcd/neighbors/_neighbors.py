@@ -27,8 +27,9 @@ from skpcd.neighbors._grid import (
     sort_points,
 )
 from skpcd.utils._compile import entry_point
+from skpcd.utils._geometry import cloud_bounds, max_extent
 from skpcd.utils._parallel import effective_threads, parallel_rows
-from skpcd.utils._validation import check_extents, cloud_bounds, max_extent
+from skpcd.utils._validation import check_extents
 
 __all__ = ["Neighborhoods", "compute_neighborhoods"]
 

@@ -12,8 +12,8 @@ from skpcd.preprocessing._normals_kernels import ball_normals, normals_rows
 from skpcd.utils import check_point_clouds
 from skpcd.utils._compile import entry_point
 from skpcd.utils._estimator import CloudTransformer
+from skpcd.utils._geometry import cloud_bounds, local_frame
 from skpcd.utils._parallel import effective_threads, parallel_rows
-from skpcd.utils._validation import cloud_bounds, local_frame
 
 __all__ = ["NormalEstimator", "estimate_normals"]
 
@@ -66,7 +66,7 @@ def local_viewpoints(viewpoint, xyz, cloud_ptr, origins):
         Offsets of the clouds.
     origins : ndarray of shape (n_clouds, 3), float64
         The origins of the clouds' local frames
-        (:func:`~skpcd.utils._validation.local_frame`).
+        (:func:`~skpcd.utils._geometry.local_frame`).
 
     Returns
     -------
@@ -186,7 +186,7 @@ def normals_f32(points, neighborhoods, viewpoint, n_threads, cloud_ptr=None):
     """Normals and curvature, float32, of float32 packed points.
 
     ``points`` are in their clouds' local frames
-    (:func:`~skpcd.utils._validation.local_frame`); ``viewpoint`` is one
+    (:func:`~skpcd.utils._geometry.local_frame`); ``viewpoint`` is one
     point (3,) for all, or one per cloud ``(n_clouds, 3)`` in the same
     frames, the clouds given by ``cloud_ptr`` (default: one cloud).
     """

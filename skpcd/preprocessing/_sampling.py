@@ -14,8 +14,8 @@ from skpcd.preprocessing._spacing import point_spacing
 from skpcd.utils import check_point_clouds
 from skpcd.utils._compile import entry_point
 from skpcd.utils._estimator import CloudTransformer
+from skpcd.utils._geometry import point_bounds
 from skpcd.utils._parallel import effective_threads, parallel_rows
-from skpcd.utils._validation import point_bounds
 
 __all__ = ["GridSampler", "grid_sample"]
 

@@ -2,7 +2,7 @@
 
 PCL computes in float32 on the coordinates it is given, 0.5 m coarse at
 y = 4.2e6. skpcd takes an axis reaching beyond 1024 from the origin relative
-to the cloud's minimum (in float64, :func:`skpcd.utils._validation.local_frame`)
+to the cloud's minimum (in float64, :func:`skpcd.utils._geometry.local_frame`)
 and leaves PCL's own coordinates as they are. See "Coordinates far from the
 origin" in the user guide.
 """

@@ -21,7 +21,7 @@ from skpcd.io._api import read_point_cloud
 from skpcd.io._chunks import file_bounds, is_path, is_streamed, iter_file_chunks
 from skpcd.segmentation._clusters import check_scene
 from skpcd.segmentation.tiling._geometry import TileGrid
-from skpcd.utils._validation import point_bounds
+from skpcd.utils._geometry import point_bounds
 
 __all__ = [
     "TiledScene",
