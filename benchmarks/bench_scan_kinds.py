@@ -72,8 +72,12 @@ METHODS = ("auto", "previous", "smrf mobile", "CSF + sklearn DBSCAN", "Open3D")
 
 def segment(method, xyz):
     """``(labels, ground, eps, kind)`` of one method on one scene."""
-    from skpcd.segmentation import GroundFilter, estimate_eps, segment_scene
-    from skpcd.segmentation._ground import GROUND_PRESETS
+    from skpcd.segmentation import (
+        GROUND_PRESETS,
+        GroundFilter,
+        estimate_eps,
+        segment_scene,
+    )
 
     if method in ("auto", "previous", "smrf mobile"):
         ground = {"auto": "auto", "previous": "csf", "smrf mobile": "mobile"}[method]

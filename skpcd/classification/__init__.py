@@ -13,6 +13,7 @@ from skpcd.classification._default import (
     make_named_pipeline,
 )
 from skpcd.classification._reject import RejectUnknown
+from skpcd.classification._segments import identify_segments
 from skpcd.classification._street import (
     STREET_MODEL_CLASSES,
     STREET_MODEL_PATH,
@@ -33,6 +34,7 @@ __all__ = [
     "SimulationAugmented",
     "TwoStepClassifier",
     "case_similarity",
+    "identify_segments",
     "load_street_model",
     "make_case_based_pipeline",
     "make_default_pipeline",

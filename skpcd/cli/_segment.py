@@ -1,8 +1,6 @@
 """``skpcd segment SCENE -o FOLDER`` and ``skpcd identify SCENE --model M -o OUT``."""
 
 import csv
-import json
-import re
 import sys
 import tempfile
 import time
@@ -23,12 +21,9 @@ from skpcd.cli._common import (
     side_file,
     unique_counts,
 )
+from skpcd.io._segment_folder import SEGMENT_FORMATS
 
 KINDS = ("object", "facade", "wire")
-SEGMENT_FORMATS = ("ply", "pcd", "las", "laz", "xyz", "txt", "csv", "npy")
-
-# points of the segments predicted at a time by identify (memory bound)
-_PREDICT_POINTS = 2_000_000
 
 
 def add_segmentation_options(p):
@@ -275,20 +270,14 @@ def _metadata(args, result):
     }
 
 
-def _written_by_segment(name):
-    """The entries ``skpcd segment`` writes in its folder."""
-    from skpcd.io._api import SEGMENTATION_METADATA, SEGMENTS_SUMMARY
-
-    return name in (SEGMENTS_SUMMARY, SEGMENTATION_METADATA) or bool(
-        re.fullmatch(rf"segment_\d{{4,}}\.({'|'.join(SEGMENT_FORMATS)})", name)
-    )
-
-
 def run_segment(args):
     from skpcd.exceptions import MissingFileError
-    from skpcd.io import write_point_cloud
-    from skpcd.io._api import SEGMENTATION_METADATA, SEGMENTS_SUMMARY
-    from skpcd.io._atomic import atomic_folder, check_folder_output
+    from skpcd.io._atomic import check_folder_output
+    from skpcd.io._segment_folder import (
+        SEGMENTS_SUMMARY,
+        is_segment_run_file,
+        write_segment_folder,
+    )
 
     out = Path(args.output)
     if out.exists() and not out.is_dir():
@@ -305,87 +294,27 @@ def run_segment(args):
             f"{out} is not empty; pass --overwrite to replace an earlier run's "
             "segments (files skpcd did not write are never deleted)",
         )
-    check_folder_output(out, overwrite=True, owned=_written_by_segment)
+    check_folder_output(out, overwrite=True, owned=is_segment_run_file)
     points, extras, result = segment_file(
         args, "segment", "all" if args.keep_fields else None
     )
     n = result.n_segments
     kinds = result.kinds if result.kinds is not None else np.full(n, "object", object)
-    width = max(4, len(str(n - 1)))
-    rows = []
-    with atomic_folder(out, overwrite=args.overwrite, owned=_written_by_segment) as tmp:
-        for i, (seg, fields) in enumerate(_segments(args, points, extras, result, tmp)):
-            name = f"segment_{i:0{width}d}.{args.format}"
-            try:
-                write_point_cloud(tmp / name, seg, fields=fields or None)
-            except ValueError as exc:  # a field the format cannot hold
-                raise CommandError("segment", str(exc)) from exc
-            lo, hi = seg.min(axis=0), seg.max(axis=0)
-            rows.append([name, i, kinds[i], len(seg), *lo, *hi, *(hi - lo)])
-        with open(tmp / SEGMENTS_SUMMARY, "w", newline="") as f:
-            writer = csv.writer(f)
-            writer.writerow(
-                ["file", "segment", "type", "n_points"]
-                + [f"{a}_{c}" for a in ("min", "max", "extent") for c in "xyz"]
-            )
-            for row in rows:
-                writer.writerow(row[:4] + [f"{v:.4f}" for v in row[4:]])
-        with open(tmp / SEGMENTATION_METADATA, "w") as f:
-            json.dump(_metadata(args, result), f, indent=1)
+    try:
+        write_segment_folder(
+            out,
+            lambda scratch: _segments(args, points, extras, result, scratch),
+            n_segments=n,
+            kinds=kinds,
+            format=args.format,
+            metadata=_metadata(args, result),
+            overwrite=args.overwrite,
+        )
+    except ValueError as exc:  # a field the format cannot hold
+        raise CommandError("segment", str(exc)) from exc
     if not args.quiet:
         print(f"written   {n} {args.format} files and {SEGMENTS_SUMMARY} -> {out}")
     return 0
-
-
-def _classify_segments(model, segments, args, types=None):
-    """Answer, its kind, confidence and size of each segment, predicted in
-    batches of about ``_PREDICT_POINTS`` points (the answers do not depend
-    on the batches). Segments whose ``types`` is not "object" (facades,
-    wires) are not predicted: their answer is their type, with no score."""
-    preds, scores, sizes, kind, batch, size = [], [], [], None, [], 0
-    fixed = {}
-
-    def flush():
-        nonlocal kind
-        pred, kind, score = predict_or_explain(model, batch, args, "identify")
-        preds.append(np.asarray(pred))
-        scores.append(np.full(len(batch), np.nan) if score is None else score)
-        batch.clear()
-
-    for i, (seg, _) in enumerate(segments):
-        sizes.append(len(seg))
-        if types is not None and types[i] != "object":
-            fixed[i] = str(types[i])
-            continue
-        batch.append(seg)
-        size += len(seg)
-        if size >= _PREDICT_POINTS:
-            flush()
-            size = 0
-    if batch:
-        flush()
-    n = len(sizes)
-    pred = np.empty(n, dtype=object)
-    score = np.full(n, np.nan)
-    predicted = np.setdiff1d(np.arange(n), list(fixed)) if fixed else np.arange(n)
-    if preds:
-        pred[predicted] = np.concatenate(preds)
-        score[predicted] = np.concatenate(scores)
-    for i, name in fixed.items():
-        pred[i] = name
-    return pred, kind, score, np.array(sizes, dtype=int)
-
-
-def _per_point(labels, values, fill, dtype, out, chunk=1_000_000):
-    """``values[labels]`` (``fill`` where labels < 0) into ``out``, chunk by
-    chunk (``labels`` and ``out`` may be memmaps)."""
-    for start in range(0, len(labels), chunk):
-        lab = np.asarray(labels[start : start + chunk])
-        part = np.full(len(lab), fill, dtype=dtype)
-        inside = lab >= 0
-        part[inside] = values[lab[inside]]
-        out[start : start + len(lab)] = part
-    return out
 
 
 def _is_las(path):
@@ -393,8 +322,10 @@ def _is_las(path):
 
 
 def run_identify(args):
+    from skpcd.classification import identify_segments
     from skpcd.io import write_labelled_scan
     from skpcd.io._atomic import PARTIAL_MARK, atomic_path
+    from skpcd.segmentation._members import spread_to_points
 
     inputs = [args.scene] + ([args.model] if args.model else [])
     out = check_output(args.output, args, "identify", inputs=inputs)
@@ -410,11 +341,11 @@ def run_identify(args):
                 tempfile.TemporaryDirectory(prefix=PARTIAL_MARK, dir=out.parent)
             )
         )
-        pred, kind, seg_score, seg_sizes = _classify_segments(
+        pred, kind, seg_score, seg_sizes = identify_segments(
             model,
             _segments(args, points, {}, result, work, fields=False),
-            args,
-            result.kinds,
+            kinds=result.kinds,
+            predict=lambda m, clouds: predict_or_explain(m, clouds, args, "identify"),
         )
         classes = list(getattr(model, "classes_", []))
         classes += sorted({str(p) for p in pred} - {str(c) for c in classes})
@@ -429,7 +360,7 @@ def run_identify(args):
                     work / f"{name}.npy", "w+", dtype=dtype, shape=(n_points,)
                 )
             )
-            return _per_point(result.labels, values, fill, dtype, target)
+            return spread_to_points(result.labels, values, fill, target)
 
         point_class = per_point("class", seg_class, -1, np.int32)
         point_score = (

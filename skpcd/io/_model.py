@@ -82,7 +82,8 @@ TRUSTED_TYPES = (
     "skpcd.preprocessing._sampling.GridSampler",
     "skpcd.segmentation._clusters.EuclideanClusters",
     "skpcd.segmentation._dbscan.AutoEpsDBSCAN",
-    "skpcd.segmentation._ground.GroundFilter",
+    "skpcd.segmentation.ground._filter.GroundFilter",
+    "skpcd.segmentation.ground._terrain.Terrain",
 )
 
 # first bytes of what joblib.dump writes: a pickle (protocol 2 to 5), or

@@ -14,7 +14,6 @@ memory.
 
 from skpcd.segmentation._clusters import EuclideanClusters, euclidean_clusters
 from skpcd.segmentation._dbscan import AutoEpsDBSCAN, estimate_eps, plot_eps_curve
-from skpcd.segmentation._ground import GROUND_PRESETS, GroundFilter
 from skpcd.segmentation._scan_kind import (
     SCAN_KINDS,
     ScanKind,
@@ -23,6 +22,7 @@ from skpcd.segmentation._scan_kind import (
 )
 from skpcd.segmentation._scene import SceneSegmentation, make_scene, segment_scene
 from skpcd.segmentation._structures import STRUCTURE_DEFAULTS
+from skpcd.segmentation.ground import GROUND_PRESETS, GroundFilter
 from skpcd.segmentation.tiling import TiledScene, TileGrid, tile_scene
 
 __all__ = [

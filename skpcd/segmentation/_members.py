@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["iter_segment_points", "segment_members"]
+__all__ = ["iter_segment_points", "segment_members", "spread_to_points"]
 
 
 def segment_members(labels, n_segments):
@@ -109,3 +109,41 @@ def iter_segment_points(
             )
     finally:
         shutil.rmtree(spill, ignore_errors=True)
+
+
+def spread_to_points(labels, values, fill, out, chunk=1_000_000):
+    """The value of each point's segment: ``values[labels]``, ``fill`` where
+    a label is negative, into ``out``, a chunk of points at a time
+    (``labels`` and ``out`` may be memmaps that stay on disk).
+
+    Parameters
+    ----------
+    labels : array-like of shape (n_points,)
+        Segment of each point; negative for none.
+    values : ndarray of shape (n_segments,)
+        A value per segment.
+    fill : scalar
+        The value of the points in no segment.
+    out : array-like of shape (n_points,)
+        Where the values go (its dtype is theirs).
+    chunk : int, default=1_000_000
+        Points at a time.
+
+    Returns
+    -------
+    out : array-like of shape (n_points,)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from skpcd.segmentation._members import spread_to_points
+    >>> spread_to_points(np.array([1, -1, 0]), np.array([5, 7]), 0, np.empty(3, int))
+    array([7, 0, 5])
+    """
+    for start in range(0, len(labels), chunk):
+        lab = np.asarray(labels[start : start + chunk])
+        part = np.full(len(lab), fill, dtype=out.dtype)
+        inside = lab >= 0
+        part[inside] = values[lab[inside]]
+        out[start : start + len(lab)] = part
+    return out

@@ -26,8 +26,8 @@ from skpcd.segmentation._clusters import (
     filter_cluster_sizes,
 )
 from skpcd.segmentation._dbscan import EPS_SCALE, AutoEpsDBSCAN
-from skpcd.segmentation._ground import GROUND_PRESETS, GroundFilter
 from skpcd.segmentation._scan_kind import sweep_coordinates
+from skpcd.segmentation.ground import GROUND_PRESETS, GroundFilter
 from skpcd.utils._compile import entry_point
 
 __all__ = ["SceneSegmentation", "make_scene", "segment_scene"]

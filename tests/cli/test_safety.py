@@ -116,11 +116,11 @@ def test_predict_refuses_a_folder_of_an_interrupted_or_mixed_run(
 
 
 def _interrupt_on_write(monkeypatch, after, how):
-    """Make the ``after``-th point-cloud write interrupt the command."""
-    import skpcd.io
+    """Make the ``after``-th segment file written interrupt the command."""
+    import skpcd.io._segment_folder as folder
 
     calls = []
-    original = skpcd.io.write_point_cloud
+    original = folder.write_point_cloud
 
     def write(*args, **kwargs):
         calls.append(1)
@@ -131,7 +131,7 @@ def _interrupt_on_write(monkeypatch, after, how):
             raise KeyboardInterrupt
         return original(*args, **kwargs)
 
-    monkeypatch.setattr(skpcd.io, "write_point_cloud", write)
+    monkeypatch.setattr(folder, "write_point_cloud", write)
 
 
 @pytest.mark.parametrize("how", ["SIGINT", "SIGTERM"])
@@ -172,13 +172,13 @@ def test_ctrl_c_in_a_real_process_is_one_line(tmp_path, scene_file):
     script = textwrap.dedent(
         f"""
         import sys, time
-        import skpcd.io
+        import skpcd.io._segment_folder as folder
         from skpcd.cli import main
-        original = skpcd.io.write_point_cloud
+        original = folder.write_point_cloud
         def slow(*a, **k):
             time.sleep(2.0)  # still writing when the signal comes, under any load
             return original(*a, **k)
-        skpcd.io.write_point_cloud = slow
+        folder.write_point_cloud = slow
         sys.exit(main({_segment_args(scene, out, "--eps", "1.0", "--quiet")!r}))
         """
     )

@@ -6,8 +6,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from skpcd.segmentation import GROUND_PRESETS, GroundFilter
-from skpcd.segmentation._ground import _objects
-from skpcd.segmentation._ground_kernels import fill_surface, interpolate_terrain
+from skpcd.segmentation.ground._filter import fit_window
+from skpcd.segmentation.ground._raster import raster_extent
+from skpcd.segmentation.ground._smrf import opening_objects
+from skpcd.segmentation.ground._smrf_kernels import fill_surface, interpolate_terrain
 
 
 def _terrain(n, size, seed, slope=0.05):
@@ -107,13 +109,13 @@ def test_opening_and_interpolation_helpers():
     z = np.zeros((9, 9))
     known = np.ones(z.shape, dtype=bool)
     z[4, 4] = 5.0  # a one-cell spike goes, a plateau wider than the disk stays
-    objects = _objects(z, known, 1, 0.15, 1.0)
+    objects = opening_objects(z, known, 1, 0.15, 1.0)
     assert objects.sum() == 1 and objects[4, 4]
     z[2:7, 2:7] = 3.0
-    assert not _objects(z, known, 1, 0.15, 1.0)[4, 4]
+    assert not opening_objects(z, known, 1, 0.15, 1.0)[4, 4]
     # cells without points (+inf) take no part in the opening
     z[:, :2] = np.inf
-    objects = _objects(z, known & np.isfinite(z), 1, 0.15, 1.0)
+    objects = opening_objects(z, known & np.isfinite(z), 1, 0.15, 1.0)
     assert objects[:, :2].all() and not objects[:, 2:].any()
     # the terrain interpolation is exact on a plane, across a gap
     yy, xx = np.mgrid[0:20, 0:30]
@@ -158,11 +160,12 @@ def test_point_order_invariance():
     np.testing.assert_array_equal(GroundFilter().fit_predict(X[perm]), gf.ground_[perm])
 
 
-class _DenseGroundFilter(GroundFilter):
+def _dense_fit(filt, X):
     # the filter on the whole bounding raster (the path of a window of a
     # larger raster): the reference of the island path
-    def _minimum_surface(self, xyz):
-        return GroundFilter._minimum_surface(self, xyz)
+    xyz = np.ascontiguousarray(X, dtype=np.float64)
+    lo, nx, ny = raster_extent(xyz, filt.cell)
+    return fit_window(filt, xyz, (*lo, nx, ny, 0, 0, nx, ny), 1)
 
 
 @pytest.mark.parametrize("preset", ["aerial", "mobile"])
@@ -173,8 +176,8 @@ def test_far_points_are_islands_equal_to_the_whole_raster(preset):
     far = np.array([[400, 30, 5.0], [405, 33, 5.5], [30, 420, -3], [250, 250, 0]])
     X = np.vstack([ground, objects, far])
     sparse = GroundFilter(**GROUND_PRESETS[preset]).fit(X)
-    dense = _DenseGroundFilter(**GROUND_PRESETS[preset]).fit(X)
-    assert len(sparse._patches) == 4 and len(dense._patches) == 1
+    dense = _dense_fit(GroundFilter(**GROUND_PRESETS[preset]), X)
+    assert len(sparse._terrain.patches) == 4 and len(dense._terrain.patches) == 1
     np.testing.assert_array_equal(sparse.ground_, dense.ground_)
     np.testing.assert_array_equal(sparse.dem_, dense.dem_)
     np.testing.assert_array_equal(sparse.objects_, dense.objects_)
@@ -228,7 +231,7 @@ def test_far_outlier_costs_its_own_cells_not_the_bounding_box():
 
 
 def test_occupied_cells_cap(monkeypatch):
-    import skpcd.segmentation._ground as module
+    import skpcd.segmentation.ground._smrf as module
 
     monkeypatch.setattr(module, "MAX_CELLS", 10_000)
     X = np.array([[0.0, 0, 0], [1e6, 1e6, 0]])
@@ -299,8 +302,8 @@ def test_n_jobs_gives_the_same_bits(preset):
 def test_n_jobs_gives_the_same_bits_in_small_chunks(monkeypatch):
     # many parts, bands and chunks of every size (3 threads: uneven ones), on
     # islands (a far group of points) and on zeros of both signs
-    import skpcd.segmentation._ground as module
-    import skpcd.segmentation._raster as raster
+    import skpcd.segmentation.ground._raster as raster
+    import skpcd.segmentation.ground._smrf as module
 
     ground, objects = _scene(5)
     far = ground[:3000] + np.array([500.0, 0.0, 3.0])

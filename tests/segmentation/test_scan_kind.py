@@ -13,12 +13,12 @@ from hypothesis import strategies as st
 from skpcd.datasets import make_street_scene
 from skpcd.exceptions import SegmentationWarning
 from skpcd.segmentation import (
+    GROUND_PRESETS,
     SCAN_KINDS,
     GroundFilter,
     describe_scan,
     segment_scene,
 )
-from skpcd.segmentation._ground import GROUND_PRESETS
 
 
 def read_sweep(path):

@@ -83,7 +83,7 @@ def test_csf_missing_names_the_extra(monkeypatch):
 
 
 def test_csf_fills_the_empty_parts_of_the_bounding_box():
-    from skpcd.segmentation._csf import _far_fill
+    from skpcd.segmentation.ground._csf import _far_fill
 
     rng = np.random.default_rng(0)
     # a street in steps along a diagonal: most of the box is empty

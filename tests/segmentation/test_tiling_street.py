@@ -16,8 +16,8 @@ import pytest
 from skpcd.datasets import make_urban_objects
 from skpcd.segmentation import GROUND_PRESETS, GroundFilter, TileGrid
 from skpcd.segmentation import segment_scene as _segment_scene
-from skpcd.segmentation._ground import reach_cells
-from skpcd.segmentation.tiling._segment import _window_filter
+from skpcd.segmentation.ground._filter import fit_window
+from skpcd.segmentation.ground._smrf import reach_cells
 
 
 def segment_scene(*args, **kwargs):
@@ -180,9 +180,8 @@ def test_ground_filter_on_a_window_is_the_whole_raster(street, ground):
         inside = np.all((cells >= [c0, r0]) & (cells < [c0 + wx, r0 + wy]), axis=1)
         if not inside.any():
             continue
-        est = _window_filter(GroundFilter(**params))
-        est._raster = (lo[0], lo[1], nx, ny, c0, r0, wx, wy)
-        est.fit(points[inside])
+        window = (lo[0], lo[1], nx, ny, c0, r0, wx, wy)
+        est = fit_window(GroundFilter(**params), points[inside], window, 1)
         # the cells at least reach from every edge of the window inside the
         # raster
         a0 = [c0 if c0 == 0 else c0 + reach, r0 if r0 == 0 else r0 + reach]

@@ -23,8 +23,8 @@ from skpcd.segmentation._dbscan import (
     eps_from_knee,
     sample_queries,
 )
-from skpcd.segmentation._ground import GroundFilter, reach_cells
-from skpcd.segmentation._raster import minimum_raster
+from skpcd.segmentation.ground._filter import fit_window
+from skpcd.segmentation.ground._smrf import reach_cells
 from skpcd.segmentation.tiling._dispatch import map_tiles
 from skpcd.segmentation.tiling._geometry import held_square, reaches
 from skpcd.segmentation.tiling._spill import (
@@ -40,32 +40,9 @@ __all__ = ["segment_tiled"]
 # --- the ground filter on a window of the scene's raster -------------------
 
 
-def _window_filter(base):
-    """A GroundFilter class fitted on a window of the whole scene's raster."""
-
-    class _WindowGroundFilter(GroundFilter):
-        # Same parameters and steps as GroundFilter; only the raster is a
-        # window (``_raster``: scene origin, scene cells, window start and
-        # size) of the raster of the whole scene, so cells and
-        # interpolation weights are those of the untiled filter.
-
-        def _minimum_surface(self, xyz):
-            x0, y0, nx, ny, c0, r0, wx, wy = self._raster
-            zmin = minimum_raster(
-                xyz, (x0, y0), float(self.cell), (nx, ny), (c0, r0), (wy, wx),
-                self._n_threads,
-            )  # fmt: skip
-            return np.array([x0 + c0 * self.cell, y0 + r0 * self.cell]), zmin
-
-        def _frame(self, grid):
-            return self._raster[:6]
-
-    return _WindowGroundFilter(**base.get_params())
-
-
 def ground_reach(filt):
     """How far (in metres) the ground filter's answer at a point depends on
-    the points around it: :func:`~skpcd.segmentation._ground.reach_cells`
+    the points around it: :func:`~skpcd.segmentation.ground._smrf.reach_cells`
     cells beyond the point's own, plus one for the rounding of the tile and
     cell edges."""
     return (reach_cells(filt) + 1) * float(filt.cell)
@@ -93,12 +70,9 @@ def _ground_prepare(xyz, index, ground, tile, grid, lo, nxy, cell, reach):
 
 def _ground_tile(xyz, owned, raster, filt, n_threads):
     """Ground flags of the owned points of a buffered tile."""
-    est = _window_filter(filt).set_params(n_jobs=n_threads)
-    est._raster = raster
     if len(xyz) == 0:
         return np.zeros(0, dtype=bool)
-    est.fit(xyz)
-    return est.ground_[owned]
+    return fit_window(filt, xyz, raster, n_threads).ground_[owned]
 
 
 def _cluster_prepare(xyz, index, ground, tile, grid, reach):

@@ -31,7 +31,7 @@ def raster_extent(xyz, cell, n_threads=1):
     """The raster of a scene: its corner and its size in cells; a
     ValueError when the coordinates are not finite or span more cells than
     can be indexed."""
-    from skpcd.segmentation._ground_kernels import extent_parts
+    from skpcd.segmentation.ground._raster_kernels import extent_parts
 
     n_parts = min(n_threads, max(1, len(xyz) // _MIN_PART_POINTS))
     bounds = np.linspace(0, len(xyz), n_parts + 1).astype(np.int64)
@@ -60,7 +60,7 @@ def raster_extent(xyz, cell, n_threads=1):
 def cell_indices(xyz, cell, n_threads=1):
     """The raster of a scene (:func:`_raster`) and the (col, row) cell of
     every point."""
-    from skpcd.segmentation._ground_kernels import cell_indices_rows
+    from skpcd.segmentation.ground._raster_kernels import cell_indices_rows
 
     lo, nx, ny = raster_extent(xyz, cell, n_threads)
     cells = np.empty((len(xyz), 2), dtype=np.int64)
@@ -99,7 +99,7 @@ def minimum_raster(xyz, origin, cell, size, start, shape, n_threads):
     zmin : ndarray of shape ``shape``
         +inf in the cells without a point.
     """
-    from skpcd.segmentation._ground_kernels import (
+    from skpcd.segmentation.ground._raster_kernels import (
         cell_minimum_parts,
         merge_minimum,
     )

@@ -15,11 +15,15 @@ import os
 import sys
 
 import numpy as np
+from scipy import ndimage
 from threadpoolctl import threadpool_limits
 
-from skpcd.utils._validation import point_bounds
+from skpcd.segmentation.ground._raster import MAX_CELLS, cell_indices, islands
+from skpcd.segmentation.ground._raster_kernels import cell_mean, cell_minimum
+from skpcd.segmentation.ground._terrain import Terrain
+from skpcd.utils._geometry import point_bounds
 
-__all__ = ["csf_ground"]
+__all__ = ["csf_ground", "csf_terrain"]
 
 _MISSING = (
     "GroundFilter(method='csf') needs the reference cloth simulation filter, "
@@ -95,8 +99,6 @@ def csf_ground(
     of fewer than 10 points is ground. Empty parts of a group's bounding
     box far from its points are filled (:func:`_far_fill`).
     """
-    from skpcd.segmentation._raster import MAX_CELLS, cell_indices, islands
-
     _import_csf()
     ground = np.zeros(len(xyz), dtype=bool)
     if len(xyz) == 0:
@@ -212,10 +214,6 @@ def _far_fill(xyz, cell):
     distance transform. The cells near the points are left to CSF, so a
     scene without large empty areas gets no fill point and CSF's own
     answer."""
-    from scipy import ndimage
-
-    from skpcd.segmentation._ground_kernels import cell_minimum
-
     extent = point_bounds(xyz[:, :2])[1]
     nx, ny = (int(v) for v in np.floor(extent / cell) + 1)
     if nx * ny > _MAX_FILL_CELLS or nx * ny <= 1:
@@ -231,3 +229,68 @@ def _far_fill(xyz, cell):
     r, c = np.nonzero(far)
     z = zmin[ri[r, c], ci[r, c]]
     return np.column_stack([(c + 0.5) * cell, (r + 0.5) * cell, z])
+
+
+def csf_terrain(xyz, ground, cell, n_threads=1):
+    """A terrain model of the ground points of a scene.
+
+    The DEM is the mean height of the ground points in each ``cell``; the
+    cells without ground take the value of the nearest cell with ground
+    (their ``objects`` flag is set). A scene of islands of occupied cells
+    far apart has one patch per island (its bounding rectangle grown by a
+    cell).
+
+    Parameters
+    ----------
+    xyz : ndarray of shape (n_points, 3)
+        The scene.
+    ground : ndarray of shape (n_points,), dtype bool
+        Its ground points.
+    cell : float
+        Side of the cells.
+    n_threads : int, default=1
+        Threads of the pass that finds the points' cells.
+
+    Returns
+    -------
+    terrain : Terrain
+    """
+    cell = float(cell)
+    lo, nx, ny, cells = cell_indices(xyz, cell, n_threads)
+    if nx * ny <= len(xyz):
+        rects, label = np.array([[0, 0, nx - 1, ny - 1]]), None
+    else:  # the DEM of the occupied parts only
+        rects, label = islands(cells, 2)
+    del cells
+    patches = []
+    order = None if label is None else np.argsort(label, kind="stable")
+    bounds = (
+        None
+        if label is None
+        else np.searchsorted(label[order], np.arange(len(rects) + 1))
+    )
+    for i, r in enumerate(rects):  # a loop over islands, not points
+        c0, r0 = np.maximum(r[:2] - 1, 0)
+        c1, r1 = np.minimum(r[2:] + 1, [nx - 1, ny - 1])
+        mine = slice(None) if label is None else order[bounds[i] : bounds[i + 1]]
+        pts, g = xyz[mine], ground[mine]
+        shape = (int(r1 - r0 + 1), int(c1 - c0 + 1))
+        mean = np.zeros(shape)
+        count = np.zeros(shape, dtype=np.int64)
+        x0, y0 = lo + cell * np.array([c0, r0])
+        cell_mean(
+            np.ascontiguousarray(pts), g, x0, y0, cell, shape[1], shape[0],
+            mean, count,
+        )  # fmt: skip
+        empty = count == 0
+        if empty.all():  # no ground: the lowest point's height
+            dem = np.full(shape, pts[:, 2].min())
+        elif empty.any():
+            nearest = ndimage.distance_transform_edt(
+                empty, return_distances=False, return_indices=True
+            )
+            dem = mean[tuple(nearest)]
+        else:
+            dem = mean
+        patches.append((int(c0), int(r0), empty, dem))
+    return Terrain(lo, cell, patches, shape=None if label is None else (ny, nx))
