@@ -127,8 +127,10 @@ def write_scene(path, n_points, *, seed=0):
     description (copies, points, extent, seconds)."""
     import laspy
 
+    from skpcd.datasets._object_scene import (
+        terrain_height,  # the terrain make_scene uses
+    )
     from skpcd.segmentation import make_scene
-    from skpcd.segmentation._scene import _terrain  # the terrain make_scene uses
 
     start = time.perf_counter()
     objects = load_objects()
@@ -153,7 +155,7 @@ def write_scene(path, n_points, *, seed=0):
             # lift the copy onto the terrain at its new place: ground and noise
             # point by point, objects rigidly (their largest lift, so that no
             # point ends below the terrain)
-            lift = _terrain(xyz[:, 0], xyz[:, 1], 1.0) - _terrain(
+            lift = terrain_height(xyz[:, 0], xyz[:, 1], 1.0) - terrain_height(
                 base[:, 0], base[:, 1], 1.0
             )
             obj = truth >= 0

@@ -113,9 +113,9 @@ def fold_objects(objects, labels, n_folds, seed):
 def score(points, truth, labels, n_objects, relief):
     """ARI and fraction of objects whole, over object points > 0.5 m up;
     and the share of noise points put in a segment."""
-    from skpcd.segmentation._scene import _terrain
+    from skpcd.datasets._object_scene import terrain_height
 
-    height = points[:, 2] - _terrain(points[:, 0], points[:, 1], relief)
+    height = points[:, 2] - terrain_height(points[:, 0], points[:, 1], relief)
     scored = (truth >= 0) & (height > 0.5)
     ari = adjusted_rand_score(truth[scored], labels[scored])
     whole = np.zeros(n_objects, dtype=bool)

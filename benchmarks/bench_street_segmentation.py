@@ -83,10 +83,10 @@ def street_scenes():
 
 
 def dales_scenes():
-    from skpcd.segmentation._scene import _terrain
+    from skpcd.datasets._object_scene import terrain_height
 
     for kind, seed, points, cls, truth in dales_scenes_with_truth():
-        height = points[:, 2] - _terrain(points[:, 0], points[:, 1], 1.0)
+        height = points[:, 2] - terrain_height(points[:, 0], points[:, 1], 1.0)
         yield kind, seed, points, cls, truth, height
 
 

@@ -11,7 +11,7 @@ mean k-th nearest-neighbour distance (Wang et al., 2019): a multiple (``eps_scal
 2.5 by default) of the distance at the curve's knee.
 
 To see how well it works we need a scene whose objects we know:
-:func:`~skpcd.segmentation.make_scene` places segmented objects on a synthetic terrain,
+:func:`~skpcd.datasets.make_scene` places segmented objects on a synthetic terrain,
 with gaps between them, holes in the ground and noise points. The objects are DALES
 objects where ``SKPCD_DALES_DIR`` names their folder, and synthetic objects of
 :func:`skpcd.datasets.make_urban_objects` otherwise; the output and the figures'
@@ -22,8 +22,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from sklearn.metrics import adjusted_rand_score
 
-from skpcd.datasets import load_dales_objects
-from skpcd.segmentation import AutoEpsDBSCAN, make_scene, plot_eps_curve, segment_scene
+from skpcd.datasets import load_dales_objects, make_scene
+from skpcd.segmentation import AutoEpsDBSCAN, plot_eps_curve, segment_scene
 
 # The DALES objects where SKPCD_DALES_DIR names their folder, else synthetic objects
 # of make_urban_objects (40 per class); ``objects.folder`` is None for the latter.

@@ -1,6 +1,7 @@
 """Datasets: synthetic generators and the embedded default objects."""
 
 from skpcd.datasets._dales import DALES_ENV, load_dales_objects
+from skpcd.datasets._object_scene import make_scene
 from skpcd.datasets._primitives import PRIMITIVES, make_primitives
 from skpcd.datasets._random import make_point_clouds
 from skpcd.datasets._street import (
@@ -24,6 +25,7 @@ __all__ = [
     "load_dales_objects",
     "make_point_clouds",
     "make_primitives",
+    "make_scene",
     "make_street_objects",
     "make_street_scene",
     "make_urban_objects",

@@ -12,15 +12,17 @@ and no structures, tile by tile (:func:`tile_scene`) for scans larger than
 memory.
 """
 
+from skpcd.datasets._object_scene import make_scene
 from skpcd.segmentation._clusters import EuclideanClusters, euclidean_clusters
-from skpcd.segmentation._dbscan import AutoEpsDBSCAN, estimate_eps, plot_eps_curve
+from skpcd.segmentation._dbscan import AutoEpsDBSCAN, estimate_eps
+from skpcd.segmentation._eps_plot import plot_eps_curve
 from skpcd.segmentation._scan_kind import (
     SCAN_KINDS,
     ScanKind,
     describe_scan,
     sweep_coordinates,
 )
-from skpcd.segmentation._scene import SceneSegmentation, make_scene, segment_scene
+from skpcd.segmentation._scene import SceneSegmentation, segment_scene
 from skpcd.segmentation._structures import STRUCTURE_DEFAULTS
 from skpcd.segmentation.ground import GROUND_PRESETS, GroundFilter
 from skpcd.segmentation.tiling import TiledScene, TileGrid, tile_scene

@@ -19,13 +19,12 @@ from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator, ClusterMixin, _fit_context
 from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval
-from sklearn.utils.validation import check_is_fitted
 
 from skpcd.segmentation._clusters import check_scene, grid_dbscan
 from skpcd.utils._compile import entry_point
 from skpcd.utils._parallel import effective_threads
 
-__all__ = ["AutoEpsDBSCAN", "estimate_eps", "plot_eps_curve"]
+__all__ = ["AutoEpsDBSCAN", "eps_from_knee", "estimate_eps", "fit_knee"]
 
 # Points of the fitted curve searched for the knee.
 _KNEE_GRID = 1000
@@ -76,7 +75,7 @@ def eps_from_knee(knee_distance, eps_scale):
     return float(eps_scale) * float(knee_distance)
 
 
-def _fit_knee(k, mean, degree):
+def fit_knee(k, mean, degree):
     """Polynomial fitted to the curve, and the k where it is farthest from
     its chord (both axes scaled to [0, 1]): ``(poly, knee_k, eps)``."""
     poly = np.polynomial.Polynomial.fit(k, mean, deg=min(degree, len(k) - 1))
@@ -346,7 +345,7 @@ class AutoEpsDBSCAN(ClusterMixin, BaseEstimator):
         k, mean = _kdist_curve(
             xyz, self.n_neighbors, self.max_samples, self.random_state, self.n_jobs
         )
-        poly, knee, knee_distance = _fit_knee(k, mean, self.degree)
+        poly, knee, knee_distance = fit_knee(k, mean, self.degree)
         self.curve_k_, self.curve_distances_ = k, mean
         self.curve_, self.knee_ = poly, knee
         self.knee_distance_ = knee_distance
@@ -383,65 +382,3 @@ class AutoEpsDBSCAN(ClusterMixin, BaseEstimator):
         self.core_sample_indices_ = np.flatnonzero(core)
         self.n_clusters_ = int(self.labels_.max() + 1) if len(xyz) else 0
         return self
-
-
-def plot_eps_curve(estimator, ax=None):
-    """Draw a fitted :class:`AutoEpsDBSCAN`'s distance curve, fit, knee and radius.
-
-    Needs matplotlib.
-
-    Parameters
-    ----------
-    estimator : AutoEpsDBSCAN
-        Fitted with ``eps=None``.
-    ax : matplotlib Axes, default=None
-        Where to draw; a new figure when None.
-
-    Returns
-    -------
-    ax : matplotlib Axes
-        The axes drawn on.
-
-    Examples
-    --------
-    >>> import matplotlib
-    >>> matplotlib.use("Agg")
-    >>> import numpy as np
-    >>> from skpcd.segmentation import AutoEpsDBSCAN, plot_eps_curve
-    >>> rng = np.random.default_rng(0)
-    >>> db = AutoEpsDBSCAN().fit(rng.random((500, 3)))
-    >>> ax = plot_eps_curve(db)
-    >>> ax.get_xlabel()
-    'k (nearest neighbours)'
-    """
-    check_is_fitted(estimator, "eps_")
-    if estimator.curve_ is None:
-        raise ValueError("the estimator was given eps: there is no curve to plot")
-    try:
-        import matplotlib.pyplot as plt
-    except ImportError as exc:  # pragma: no cover
-        raise ImportError("plot_eps_curve needs matplotlib") from exc
-    if ax is None:
-        _, ax = plt.subplots(figsize=(5, 3.5))
-    k = estimator.curve_k_
-    grid = np.linspace(k[0], k[-1], 200)
-    ax.plot(k, estimator.curve_distances_, "o", ms=3, label="mean k-th NN distance")
-    ax.plot(grid, estimator.curve_(grid), "-", label="fitted curve")
-    ax.plot(
-        [estimator.knee_],
-        [estimator.knee_distance_],
-        "s",
-        color="C3",
-        label=f"knee: k={estimator.knee_:.1f}, {estimator.knee_distance_:.3f}",
-    )
-    ax.axhline(
-        estimator.eps_,
-        color="C3",
-        ls="--",
-        lw=1,
-        label=f"eps = {estimator.eps_scale:g} x knee = {estimator.eps_:.3f}",
-    )
-    ax.set_xlabel("k (nearest neighbours)")
-    ax.set_ylabel("distance")
-    ax.legend(loc="lower right", fontsize="small")
-    return ax

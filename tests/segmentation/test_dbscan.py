@@ -8,7 +8,7 @@ from sklearn.cluster import DBSCAN
 from sklearn.metrics import adjusted_rand_score
 
 from skpcd.segmentation import AutoEpsDBSCAN, estimate_eps, plot_eps_curve
-from skpcd.segmentation._dbscan import _fit_knee
+from skpcd.segmentation._dbscan import fit_knee
 
 
 def _plane(n_side, spacing, z=0.0):
@@ -32,14 +32,14 @@ def test_knee_of_known_curves():
     # a concave curve (neighbours spread over a surface: sqrt(k)); the knee
     # of sqrt on [1, K] is where its slope equals the chord's
     expected = ((np.sqrt(30) + 1) / 2) ** 2
-    _, knee, eps = _fit_knee(k, np.sqrt(k), degree=8)
+    _, knee, eps = fit_knee(k, np.sqrt(k), degree=8)
     assert knee == pytest.approx(expected, abs=0.3)
     assert eps == pytest.approx(np.sqrt(knee), rel=0.01)
     # the default cubic smooths the curve: the knee moves by about 1
-    _, knee, eps = _fit_knee(k, np.sqrt(k), degree=3)
+    _, knee, eps = fit_knee(k, np.sqrt(k), degree=3)
     assert knee == pytest.approx(expected, abs=1.5)
     # a straight line has no knee worth the name; a flat curve gives k=1
-    _, knee, eps = _fit_knee(k, np.full(30, 0.5), degree=3)
+    _, knee, eps = fit_knee(k, np.full(30, 0.5), degree=3)
     assert (knee, eps) == (1.0, pytest.approx(0.5))
 
 
@@ -167,9 +167,9 @@ def _segment(points, ground, **params):
 
 
 def _whole(points, truth, labels, n_objects):
-    from skpcd.segmentation._scene import _terrain
+    from skpcd.datasets._object_scene import terrain_height
 
-    height = points[:, 2] - _terrain(points[:, 0], points[:, 1], 1.0)
+    height = points[:, 2] - terrain_height(points[:, 0], points[:, 1], 1.0)
     scored = (truth >= 0) & (height > 0.5)
     whole = []
     for i in range(n_objects):

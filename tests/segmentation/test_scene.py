@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from sklearn.metrics import adjusted_rand_score
 
+from skpcd.datasets._object_scene import terrain_height
 from skpcd.segmentation import GroundFilter, make_scene, segment_scene
-from skpcd.segmentation._scene import _terrain
 
 N_PER_CLASS = 6
 # the quality bounds are measured on real objects: those tests run on the
@@ -61,7 +61,7 @@ def scenes(objects):
 
 
 def scores(points, truth, labels, n_objects):
-    height = points[:, 2] - _terrain(points[:, 0], points[:, 1], 1.0)
+    height = points[:, 2] - terrain_height(points[:, 0], points[:, 1], 1.0)
     scored = (truth >= 0) & (height > 0.5)
     ari = adjusted_rand_score(truth[scored], labels[scored])
     whole = np.zeros(n_objects, dtype=bool)
@@ -113,7 +113,7 @@ def results(scenes, objects):
 def test_ground_removal(scenes, name):
     points, truth = scenes[name]
     ground = segment_scene(points, ground=SAMPLINGS[name]["ground"]).ground
-    height = points[:, 2] - _terrain(points[:, 0], points[:, 1], 1.0)
+    height = points[:, 2] - terrain_height(points[:, 0], points[:, 1], 1.0)
     assert ground[truth == -1].mean() > 0.995
     # objects: measured 0.1 % (aerial) and 0.5 % (mobile) of the points
     # more than 0.5 m up are taken as ground
@@ -230,7 +230,7 @@ def test_make_scene_layout(objects):
             (lo1, hi1), (lo2, hi2) = boxes[i], boxes[j]
             sep = np.maximum(lo1[:2] - hi2[:2], lo2[:2] - hi1[:2]).max()
             assert sep >= 2.0 - 1e-9
-    height = points[:, 2] - _terrain(points[:, 0], points[:, 1], 1.0)
+    height = points[:, 2] - terrain_height(points[:, 0], points[:, 1], 1.0)
     assert height[truth >= 0].min() == pytest.approx(0.0, abs=1e-9)
     with pytest.raises(ValueError, match="empty"):
         make_scene([])

@@ -19,8 +19,8 @@ from scipy.spatial import cKDTree
 from skpcd.segmentation._clusters import EUCLIDEAN_EPS, grid_dbscan
 from skpcd.segmentation._dbscan import (
     AutoEpsDBSCAN,
-    _fit_knee,
     eps_from_knee,
+    fit_knee,
     sample_queries,
 )
 from skpcd.segmentation.ground._filter import fit_window
@@ -224,7 +224,7 @@ def _estimate_eps(
             np.concatenate(far_bounds), k_max + 1, n_jobs,
         )  # fmt: skip
     mean = dist[:, 1:].mean(axis=0)
-    _, _, knee_distance = _fit_knee(np.arange(1, k_max + 1), mean, est.degree)
+    _, _, knee_distance = fit_knee(np.arange(1, k_max + 1), mean, est.degree)
     # as AutoEpsDBSCAN._estimate (test_tiling checks the two estimates agree)
     return eps_from_knee(knee_distance, est.eps_scale)
 
