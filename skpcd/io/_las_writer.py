@@ -8,6 +8,7 @@ the docstring of :mod:`skpcd.io._las`.
 import numpy as np
 
 from skpcd.exceptions import PointCloudFileError
+from skpcd.io._common import distinct_columns, field_columns, is_whole
 from skpcd.io._las_structure import import_laspy
 
 __all__ = ["write"]
@@ -39,9 +40,7 @@ def _fits(name, values, dimension):
         what = f"{dimension.num_bits}-bit unsigned"
     ok = True
     if values.dtype.kind == "f":
-        ok = bool(
-            np.all(np.isfinite(values)) and np.array_equal(values, np.round(values))
-        )
+        ok = is_whole(values)
     elif values.dtype.kind not in "biu":
         ok = False
     if len(values) and ok:
@@ -74,9 +73,7 @@ def _plan(laspy, fields):
     if colors is not None and colors.ndim == 2 and colors.shape[1] == 3:
         values = colors
         integral = values.dtype.kind in "biu" or (
-            values.dtype.kind == "f"
-            and np.all(np.isfinite(values))
-            and np.array_equal(values, np.round(values))
+            values.dtype.kind == "f" and is_whole(values)
         )
         split_colors = bool(
             integral
@@ -89,22 +86,11 @@ def _plan(laspy, fields):
         for d in laspy.PointFormat(point_format).dimensions
         if d.name not in ("X", "Y", "Z")
     }
-    columns = []
-    for name, values in extras.items():
-        if name == "colors" and split_colors:
-            columns += [
-                (c, values[:, j]) for j, c in enumerate(("red", "green", "blue"))
-            ]
-        elif values.ndim == 1:
-            columns.append((name, values))
-        elif name == "normals" and values.shape[1] == 3:
-            columns += [(f"normal_{c}", values[:, j]) for j, c in enumerate("xyz")]
-        else:
-            columns += [(f"{name}_{j}", values[:, j]) for j in range(values.shape[1])]
+    components = {"normals": ("normal_x", "normal_y", "normal_z")}
+    if split_colors:
+        components["colors"] = ("red", "green", "blue")
     standard, extra = {}, {}
-    for name, values in columns:
-        if name in standard or name in extra:
-            raise ValueError(f"field {name!r} would be written twice.")
+    for name, values in distinct_columns(field_columns(extras, components), "field"):
         if name in dimensions:
             standard[name] = _fits(name, values, dimensions[name])
         elif len(name.encode()) > 32:

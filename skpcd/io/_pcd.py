@@ -38,9 +38,15 @@ from skpcd.exceptions import PointCloudFileError
 from skpcd.io._common import (
     MAX_LINE_BYTES,
     ascii_rows,
+    check_integral,
+    coordinate_columns,
+    data_lines,
+    distinct_columns,
+    field_columns,
     float_format,
+    float_rows,
     header_line,
-    is_float32_exact,
+    packed_records,
 )
 from skpcd.io._lzf import LZFError, lzf_compress, lzf_decompress_array
 
@@ -326,27 +332,16 @@ def _read_compressed(path, body, layout, n):
 
 
 def _read_ascii(path, body, layout, n):
-    text = body.decode("ascii", errors="replace")
-    lines = [line for line in text.splitlines() if line.strip()]
+    lines = data_lines(body)
     if len(lines) != n:
         raise _fail(
             path,
             f"the header declares {n} points but the data has {len(lines)} lines.",
         )
     n_columns = sum(count for _, _, count in layout)
-    if n == 0:
-        values = np.empty((0, n_columns))
-    else:
-        try:
-            values = np.loadtxt(lines, dtype=np.float64, ndmin=2)
-        except ValueError as exc:
-            raise _fail(path, f"cannot parse the ascii data: {exc}") from None
-    if values.shape[1] != n_columns:
-        raise _fail(
-            path,
-            f"the data lines have {values.shape[1]} values, but the header declares "
-            f"{n_columns}.",
-        )
+    values = float_rows(
+        path, lines, n_columns, data="the ascii data", rows="the data lines"
+    )
     fields = {}
     column = 0
     for name, dt, count in layout:
@@ -363,13 +358,7 @@ def _read_ascii(path, body, layout, n):
         else:
             block = values[:, columns]
             if dt.kind in "iu":
-                if not np.all(np.isfinite(block)) or np.any(block != np.round(block)):
-                    raise _fail(path, f"field {name!r} has non-integer values.")
-                info = np.iinfo(dt)
-                if block.size and (block.min() < info.min or block.max() > info.max):
-                    raise _fail(
-                        path, f"field {name!r} has values out of its {dt} range."
-                    )
+                check_integral(path, block, dt, f"field {name!r}", f"its {dt} range")
             block = block.astype(dt)
         fields[name] = np.ascontiguousarray(block[:, 0] if count == 1 else block)
     return fields
@@ -426,25 +415,13 @@ def read(path):
 
 def _columns(fields):
     """``(name, values, TYPE, SIZE, COUNT)`` for each PCD field to write."""
-    coords = [np.asarray(fields[c], dtype=np.float64) for c in "xyz"]
-    coord_type = np.float32 if all(is_float32_exact(v) for v in coords) else np.float64
-    columns = [(c, v.astype(coord_type)) for c, v in zip("xyz", coords, strict=True)]
-    for name, values in fields.items():
-        if name in ("x", "y", "z"):
-            continue
-        values = np.asarray(values)
-        if name == "normals" and values.ndim == 2 and values.shape[1] == 3:
-            columns += [(f"normal_{c}", values[:, j]) for j, c in enumerate("xyz")]
-        else:
-            columns.append((name, values))
+    columns = coordinate_columns(fields) + field_columns(
+        fields, {"normals": ("normal_x", "normal_y", "normal_z")}, split=False
+    )
     out = []
-    seen = set()
-    for name, values in columns:
+    for name, values in distinct_columns(columns, "field"):
         if not name or any(ch.isspace() for ch in name) or name == "_":
             raise ValueError(f"{name!r} is not a valid PCD field name.")
-        if name in seen:
-            raise ValueError(f"field {name!r} would be written twice.")
-        seen.add(name)
         if values.dtype == np.bool_:
             values = values.astype(np.uint8)
         elif values.dtype == np.float16:
@@ -529,10 +506,7 @@ def write(path, fields, *, encoding="binary"):
             (name, values.dtype, (count,)) if count > 1 else (name, values.dtype)
             for name, values, _, _, count in columns
         ]
-        records = np.empty(n, dtype=dtype)
-        for name, values, *_ in columns:
-            records[name] = values
-        body = records.tobytes()
+        body = packed_records((c[:2] for c in columns), dtype, n)
     else:
         raw = b"".join(np.ascontiguousarray(c[1]).tobytes() for c in columns)
         packed = lzf_compress(raw)

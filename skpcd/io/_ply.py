@@ -38,10 +38,16 @@ import numpy as np
 from skpcd.exceptions import PointCloudFileError
 from skpcd.io._common import (
     ascii_rows,
+    check_integral,
+    coordinate_columns,
+    data_lines,
+    distinct_columns,
+    field_columns,
     float_format,
+    float_rows,
     group_fields,
     header_line,
-    is_float32_exact,
+    packed_records,
 )
 
 _TYPES = {
@@ -310,8 +316,7 @@ def _read_binary(path, data, start, elements, vertex, order):
 
 
 def _read_ascii(path, data, start, elements, vertex):
-    text = data[start:].decode("ascii", errors="replace")
-    lines = [line for line in text.splitlines() if line.strip()]
+    lines = data_lines(data[start:])
     total = sum(e.count for e in elements)
     if len(lines) != total:
         others = total - vertex.count
@@ -328,32 +333,21 @@ def _read_ascii(path, data, start, elements, vertex):
         first += element.count
     rows = lines[first : first + vertex.count]
     n_props = len(vertex.properties)
-    if rows:
-        try:
-            values = np.loadtxt(rows, dtype=np.float64, ndmin=2)
-        except ValueError as exc:
-            raise _fail(path, f"cannot parse the vertex lines: {exc}") from None
-    else:
-        values = np.empty((0, n_props))
-    if values.shape[1] != n_props:
-        raise _fail(
-            path,
-            f"the vertex lines have {values.shape[1]} values, but the header declares "
-            f"{n_props} vertex properties.",
-        )
+    values = float_rows(
+        path,
+        rows,
+        n_props,
+        data="the vertex lines",
+        rows="the vertex lines",
+        unit=" vertex properties",
+    )
     fields = {}
     for j, (name, code, _) in enumerate(vertex.properties):
         column = values[:, j]
         dtype = np.dtype(code)
         if dtype.kind in "iu":
-            if not np.all(np.isfinite(column)) or np.any(column != np.round(column)):
-                raise _fail(path, f"vertex property {name!r} has non-integer values.")
-            limits = np.iinfo(dtype)
-            if len(column) and (column.min() < limits.min or column.max() > limits.max):
-                raise _fail(
-                    path,
-                    f"vertex property {name!r} has values out of the {dtype} range.",
-                )
+            what = f"vertex property {name!r}"
+            check_integral(path, column, dtype, what, f"the {dtype} range")
         fields[name] = column.astype(dtype)
     return fields
 
@@ -434,31 +428,12 @@ def _storable(name, values):
 
 def _columns(fields):
     """``[(property name, 1-D values)]`` in the order to write them."""
-    coords = [np.asarray(fields[c], dtype=np.float64) for c in "xyz"]
-    coord_type = np.float32 if all(is_float32_exact(v) for v in coords) else np.float64
-    columns = [(c, v.astype(coord_type)) for c, v in zip("xyz", coords, strict=True)]
-    for name, values in fields.items():
-        if name in ("x", "y", "z"):
-            continue
-        values = np.asarray(values)
-        if values.ndim == 1:
-            columns.append((name, values))
-        elif name == "normals" and values.shape[1] == 3:
-            columns += [(c, values[:, j]) for j, c in enumerate(("nx", "ny", "nz"))]
-        elif name == "colors" and values.shape[1] == 3:
-            columns += [
-                (c, values[:, j]) for j, c in enumerate(("red", "green", "blue"))
-            ]
-        else:
-            columns += [(f"{name}_{j}", values[:, j]) for j in range(values.shape[1])]
+    components = {"normals": ("nx", "ny", "nz"), "colors": ("red", "green", "blue")}
+    columns = coordinate_columns(fields) + field_columns(fields, components)
     out = []
-    seen = set()
-    for name, values in columns:
+    for name, values in distinct_columns(columns, "property"):
         if not name or any(ch.isspace() for ch in name) or not name.isascii():
             raise ValueError(f"{name!r} is not a valid PLY property name.")
-        if name in seen:
-            raise ValueError(f"property {name!r} would be written twice.")
-        seen.add(name)
         out.append((name, _storable(name, values)))
     return out
 
@@ -513,10 +488,7 @@ def write(path, fields, *, encoding="binary"):
     else:
         order = _ORDER[fmt]
         dtype = [(name, values.dtype.newbyteorder(order)) for name, values in columns]
-        records = np.empty(n, dtype=dtype)
-        for name, values in columns:
-            records[name] = values
-        body = records.tobytes()
+        body = packed_records(columns, dtype, n)
     with open(path, "wb") as fh:
         fh.write("\n".join(header).encode("ascii"))
         fh.write(body)
