@@ -7,6 +7,7 @@ from sklearn.utils import Bunch
 
 from skpcd.datasets._urban import make_urban_objects
 from skpcd.exceptions import MissingFileError
+from skpcd.io import read_segments
 
 __all__ = ["DALES_ENV", "load_dales_objects"]
 
@@ -77,7 +78,6 @@ def load_dales_objects(
     >>> objects.source, len(objects.data), sorted(set(objects.target.tolist()))[:2]
     ('synthetic urban objects', 10, ['building', 'car'])
     """
-    from skpcd.io import read_segments
 
     if folder is None:
         folder = os.environ.get(DALES_ENV)

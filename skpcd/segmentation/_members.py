@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from skpcd.segmentation.tiling._spill import iter_chunks
+
 __all__ = ["iter_segment_points", "segment_members", "spread_to_points"]
 
 
@@ -72,7 +74,6 @@ def iter_segment_points(
     extras : dict of str to ndarray
         Their fields (empty without ``fields``).
     """
-    from skpcd.segmentation.tiling._spill import iter_chunks
 
     spill = Path(tempfile.mkdtemp(prefix=".skpcd_segments_", dir=folder))
     try:

@@ -2,6 +2,7 @@
 
 import os
 import typing
+import warnings
 from numbers import Integral, Real
 
 import numpy as np
@@ -13,15 +14,24 @@ from sklearn.utils._param_validation import (
     validate_params,
 )
 
+from skpcd.exceptions import SegmentationWarning
+from skpcd.io import iter_points, read_las_extent, read_point_cloud
+from skpcd.preprocessing import (
+    RadiusOutlierFilter,
+    StatisticalOutlierFilter,
+    point_spacing,
+)
 from skpcd.segmentation._clusters import (
     EUCLIDEAN_EPS,
     EuclideanClusters,
     check_scene,
     filter_cluster_sizes,
 )
-from skpcd.segmentation._dbscan import EPS_SCALE, AutoEpsDBSCAN
-from skpcd.segmentation._scan_kind import sweep_coordinates
+from skpcd.segmentation._dbscan import EPS_SCALE, AutoEpsDBSCAN, estimate_eps
+from skpcd.segmentation._scan_kind import SCAN_KINDS, describe_scan, sweep_coordinates
+from skpcd.segmentation._structures import KINDS, STRUCTURE_DEFAULTS, segment_structures
 from skpcd.segmentation.ground import GROUND_PRESETS, GroundFilter
+from skpcd.segmentation.tiling._segment import segment_tiled
 from skpcd.utils._compile import entry_point
 
 __all__ = ["SceneSegmentation", "segment_scene"]
@@ -327,8 +337,6 @@ def segment_scene(
             "from the scan beforehand"
         )
     if isinstance(structures, dict):
-        from skpcd.segmentation._structures import STRUCTURE_DEFAULTS
-
         unknown = sorted(set(structures) - set(STRUCTURE_DEFAULTS))
         if unknown:
             raise ValueError(
@@ -337,15 +345,11 @@ def segment_scene(
             )
     scan = None
     if ground == "auto" and tile_size is not None:
-        from skpcd.segmentation._scan_kind import describe_scan
-
         scan = describe_scan(
             _scan_sample(points, random_state), sensor=sensor, random_state=random_state
         )
         ground = "aerial" if scan.kind == "airborne" else "mobile"
     if tile_size is not None:
-        from skpcd.segmentation.tiling._segment import segment_tiled
-
         filt = _ground_filter(ground, n_jobs)
         if ground is not None:
             filt._validate_params()
@@ -383,14 +387,10 @@ def segment_scene(
             scan=scan, ground_filter=ground if isinstance(ground, str) else None
         )
     if isinstance(points, (str, os.PathLike)):
-        from skpcd.io import read_point_cloud
-
         points = read_point_cloud(points)
     xyz = check_scene(points)
     keep = None
     if denoise is not None:
-        from skpcd.preprocessing import RadiusOutlierFilter, StatisticalOutlierFilter
-
         if isinstance(denoise, str):
             named = {
                 "statistical": StatisticalOutlierFilter,
@@ -402,8 +402,6 @@ def segment_scene(
         keep = np.flatnonzero(np.asarray(denoiser.fit_predict(xyz)) == 1)
         full, xyz = len(xyz), np.ascontiguousarray(xyz[keep])
     if ground == "auto":
-        from skpcd.segmentation._scan_kind import SCAN_KINDS, describe_scan
-
         defaults = SCAN_KINDS["spinning"]  # too few points to tell
         if len(xyz) >= 13:
             scan = describe_scan(xyz, sensor=sensor, random_state=random_state)
@@ -418,8 +416,6 @@ def segment_scene(
         max_eps = SCAN_KINDS[scan.kind].get("max_eps")
         rest = xyz[~is_ground]
         if max_eps is not None and len(rest) >= 2:
-            from skpcd.segmentation._dbscan import estimate_eps
-
             eps = min(
                 estimate_eps(
                     rest, eps_scale=eps_scale, random_state=random_state, n_jobs=n_jobs
@@ -479,19 +475,15 @@ _TILED_SAMPLE = 200_000
 def _scan_sample(points, random_state):
     """Up to ``_TILED_SAMPLE`` points of a scan spread over the whole file
     (one pass, chunk by chunk), or of an array."""
-    from skpcd.io import read_las_extent
 
     if not isinstance(points, (str, os.PathLike)):
         xyz = check_scene(points)
         step = max(1, len(xyz) // _TILED_SAMPLE)
         return xyz[::step]
-    from skpcd.io import iter_points
 
     try:
         n = read_las_extent(points).n_points
     except ValueError:  # not a LAS/LAZ file: read whole, as segment_tiled does
-        from skpcd.io import read_point_cloud
-
         xyz = read_point_cloud(points)
         return xyz[:: max(1, len(xyz) // _TILED_SAMPLE)]
     step = max(1, n // _TILED_SAMPLE)
@@ -510,7 +502,6 @@ def _with_kinds(labels, ground, eps):
 
 
 def _kind_names(kinds):
-    from skpcd.segmentation._structures import KINDS
 
     return np.array(KINDS, dtype=object)[kinds]
 
@@ -549,10 +540,6 @@ def _cluster_rest(
 ):  # fmt: skip
     """The segments of the non-ground points, with the check of an
     automatic eps (see segment_scene)."""
-    import warnings
-
-    from skpcd.exceptions import SegmentationWarning
-    from skpcd.preprocessing import point_spacing
 
     kw = {
         "method": method, "eps_scale": eps_scale, "min_samples": min_samples,
@@ -596,15 +583,12 @@ def _segment_rest(
     segment_scene). ``sweep``, ``(centre, z0, radius)``: DBSCAN runs in the
     coordinates of :func:`sweep_coordinates` with that radius (a distance
     proportional to the range)."""
-    from skpcd.segmentation._dbscan import estimate_eps
 
     rest = np.flatnonzero(~is_ground)
     labels = np.full(len(xyz), -1, dtype=np.int64)
     if len(rest) < 2:
         return _with_kinds(labels, is_ground, float(eps or 0.0))
     if structures is not False:
-        from skpcd.segmentation._structures import segment_structures
-
         pts = np.ascontiguousarray(xyz[rest])
         if method == "dbscan":
             used = (

@@ -23,8 +23,21 @@ k-NN graph of the cluster.
 """
 
 import numpy as np
+from scipy.sparse import csr_array
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
 
+from skpcd.preprocessing import compute_neighborhoods
 from skpcd.segmentation._clusters import euclidean_clusters
+from skpcd.segmentation._structure_kernels import (
+    aligned_components,
+    column_counts,
+    component_covariance,
+    local_shape_rows,
+    neighbour_share,
+    same_label_edges,
+    segment_extents,
+)
 from skpcd.utils._parallel import effective_threads, parallel_rows
 
 __all__ = ["STRUCTURE_DEFAULTS", "height_above_ground", "segment_structures"]
@@ -80,7 +93,6 @@ def height_above_ground(xyz, ground_xyz, cell=1.0, n_threads=1):
     -------
     height : ndarray of shape (n_points,), float32
     """
-    from scipy.spatial import cKDTree
 
     if len(xyz) == 0:
         return np.zeros(0, dtype=np.float32)
@@ -100,7 +112,6 @@ def height_above_ground(xyz, ground_xyz, cell=1.0, n_threads=1):
 def _column_counts(xyz, mask):
     """For the masked points: points within 0.3 to 2 m above or below them
     in their ``_COLUMN`` x ``_COLUMN`` column (others 0)."""
-    from skpcd.segmentation._structure_kernels import column_counts
 
     out = np.zeros(len(xyz), dtype=np.int64)
     if not mask.any():
@@ -141,7 +152,6 @@ def _components(xyz, mask, eps, n_jobs):
 
 
 def _extents(labels, xyz, n):
-    from skpcd.segmentation._structure_kernels import segment_extents
 
     lo = np.full((n, 3), np.inf)
     hi = np.full((n, 3), -np.inf)
@@ -153,7 +163,6 @@ def _extents(labels, xyz, n):
 def _xy_axes(labels, xyz, n):
     """Per component: the standard deviations of xy along its major and
     minor horizontal axes."""
-    from skpcd.segmentation._structure_kernels import component_covariance
 
     mean = np.zeros((n, 2))
     cov = np.zeros((n, 3))
@@ -177,7 +186,6 @@ def _keep(labels, good):
 def local_shapes(xyz, nb, n_threads=1):
     """Linearity, planarity, normal (n, 3), |axis z| and spread of every
     point (rows in chunks on ``n_threads`` threads; every row its own)."""
-    from skpcd.segmentation._structure_kernels import local_shape_rows
 
     out = [np.empty(len(xyz), dtype=np.float32) for _ in range(4)]
     normal = np.empty((len(xyz), 3), dtype=np.float32)
@@ -191,7 +199,6 @@ def local_shapes(xyz, nb, n_threads=1):
 def _csr(nb, keep, data):
     """The k-NN graph's pairs with ``keep``, as a sparse matrix built
     directly in CSR form (no COO copy: about 5 bytes per edge kept)."""
-    from scipy.sparse import csr_array
 
     n = len(nb.indptr) - 1
     counts = np.add.reduceat(keep.astype(np.int64), nb.indptr[:-1])
@@ -205,7 +212,6 @@ def _regions(nb, mask, normal):
     """Connected regions of the masked points over the k-NN graph, joined
     only where the normals agree within ``_NORMAL_ANGLE``: one per smooth
     surface (a wall), none across a pole or a crown whose normals turn."""
-    from skpcd.segmentation._structure_kernels import aligned_components
 
     labels = np.empty(len(mask), dtype=np.int64)
     n = aligned_components(nb.indptr, nb.indices, mask, normal, _NORMAL_COS, labels)
@@ -214,7 +220,6 @@ def _regions(nb, mask, normal):
 
 def find_structures(xyz, height, nb, eps, params, n_jobs=None):
     """Kind of every point: 0 object, 1 facade, 2 wire (int8)."""
-    from skpcd.segmentation._structure_kernels import neighbour_share
 
     lin, plan, normal, axis_z, spread = local_shapes(xyz, nb, effective_threads(n_jobs))
     normal_z = np.abs(normal[:, 2])
@@ -300,8 +305,6 @@ def split_at_trunks(xyz, labels, trunks, nb):
     nearest along the k-NN graph within its cluster (by straight distance
     to the trunk's points when the graph does not reach it). Returns new
     labels (clusters renumbered) and how many clusters were split."""
-    from scipy.sparse.csgraph import dijkstra
-    from scipy.spatial import cKDTree
 
     has = (trunks >= 0) & (labels >= 0)
     if not has.any():
@@ -324,7 +327,6 @@ def split_at_trunks(xyz, labels, trunks, nb):
     idx = np.flatnonzero(inside)
     # edges of the k-NN graph within a cluster being split (the graph over
     # all points, the others without edges)
-    from skpcd.segmentation._structure_kernels import same_label_edges
 
     keep = np.empty(len(nb.indices), dtype=bool)
     same_label_edges(nb.indptr, nb.indices, labels, inside, keep)
@@ -387,7 +389,6 @@ def segment_structures(xyz, ground_xyz, eps, params, cluster, n_jobs=None):
     info : dict
         Counts: points typed facade and wire, clusters split.
     """
-    from skpcd.preprocessing import compute_neighborhoods
 
     params = {**STRUCTURE_DEFAULTS, **(params or {})}
     labels = np.full(len(xyz), -1, dtype=np.int64)

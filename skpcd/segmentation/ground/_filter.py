@@ -15,6 +15,7 @@ from skpcd.segmentation.ground._csf import csf_ground, csf_terrain
 from skpcd.segmentation.ground._smrf import smrf_fit, smrf_ground
 from skpcd.utils._compile import entry_point
 from skpcd.utils._parallel import effective_threads
+from skpcd.utils._validation import refuse_sequence
 
 __all__ = ["GroundFilter", "fit_window"]
 
@@ -235,7 +236,6 @@ class GroundFilter(BaseEstimator):
         self.n_jobs = n_jobs
 
     def _xyz(self, X, reset):
-        from skpcd.segmentation._clusters import refuse_sequence
 
         refuse_sequence(X)
         X = validate_data(self, X, dtype=np.float64, reset=reset)

@@ -7,7 +7,16 @@ Its corner and size (:func:`raster_extent`), the cell of every point
 """
 
 import numpy as np
+from scipy.sparse import coo_array
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
+from skpcd.segmentation.ground._raster_kernels import (
+    cell_indices_rows,
+    cell_minimum_parts,
+    extent_parts,
+    merge_minimum,
+)
 from skpcd.utils._parallel import parallel_rows
 
 # Cells computed at most (a 1 km square at 7 cm): the rasters of the
@@ -31,7 +40,6 @@ def raster_extent(xyz, cell, n_threads=1):
     """The raster of a scene: its corner and its size in cells; a
     ValueError when the coordinates are not finite or span more cells than
     can be indexed."""
-    from skpcd.segmentation.ground._raster_kernels import extent_parts
 
     n_parts = min(n_threads, max(1, len(xyz) // _MIN_PART_POINTS))
     bounds = np.linspace(0, len(xyz), n_parts + 1).astype(np.int64)
@@ -60,7 +68,6 @@ def raster_extent(xyz, cell, n_threads=1):
 def cell_indices(xyz, cell, n_threads=1):
     """The raster of a scene (:func:`_raster`) and the (col, row) cell of
     every point."""
-    from skpcd.segmentation.ground._raster_kernels import cell_indices_rows
 
     lo, nx, ny = raster_extent(xyz, cell, n_threads)
     cells = np.empty((len(xyz), 2), dtype=np.int64)
@@ -99,10 +106,6 @@ def minimum_raster(xyz, origin, cell, size, start, shape, n_threads):
     zmin : ndarray of shape ``shape``
         +inf in the cells without a point.
     """
-    from skpcd.segmentation.ground._raster_kernels import (
-        cell_minimum_parts,
-        merge_minimum,
-    )
 
     n_cells = int(shape[0]) * int(shape[1])
     n_parts = min(n_threads, max(1, len(xyz) // max(n_cells, _MIN_PART_POINTS)))
@@ -136,9 +139,6 @@ def islands(cells, reach):
     blocks joined), then rectangles at most ``2 * reach`` apart merged until
     none is: the cost follows the occupied blocks, not the scene's bounding
     box."""
-    from scipy.sparse import coo_array
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
 
     # the occupied blocks (sorted by a key), their cells' bounds
     blk = cells // reach
