@@ -78,22 +78,35 @@ def _pair(p1x, p1y, p1z, n1x, n1y, n1z, p2x, p2y, p2z, n2x, n2y, n2z):
         ux, uy, uz = n1x, n1y, n1z
         tx, ty, tz = n2x, n2y, n2z
         f3 = a1
-    # v = d x u (Eigen cross3), normalised
-    vx = dy * uz - dz * uy
-    vy = dz * ux - dx * uz
-    vz = dx * uy - dy * ux
+    vx, vy, vz = _cross(dx, dy, dz, ux, uy, uz)
     v_norm = np.float32(math.sqrt(_dot(vx, vy, vz, vx, vy, vz)))
     if v_norm == F0:
         return F0, F0, F0, F0, F0
+    fy, fx, f2 = _frame_angles(ux, uy, uz, tx, ty, tz, vx, vy, vz, v_norm)
+    return fy, fx, f2, f3, f4
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _cross(ax, ay, az, bx, by, bz):
+    """``a x b``, as Eigen's ``cross3``. Inlined."""
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _frame_angles(ux, uy, uz, tx, ty, tz, vx, vy, vz, v_norm):
+    """The Darboux frame of a pair and the target normal ``t`` in it: ``u``
+    the source normal, ``v = d x u`` (its norm ``v_norm``, not zero)
+    normalised, ``w = u x v``. Returns ``(w . t, u . t, v . t)``: the
+    arguments of f1's ``atan2f`` and f2. Inlined."""
     vx = vx / v_norm
     vy = vy / v_norm
     vz = vz / v_norm
-    # w = u x v
-    wx = uy * vz - uz * vy
-    wy = uz * vx - ux * vz
-    wz = ux * vy - uy * vx
-    f2 = _dot(vx, vy, vz, tx, ty, tz)
-    return _dot(wx, wy, wz, tx, ty, tz), _dot(ux, uy, uz, tx, ty, tz), f2, f3, f4
+    wx, wy, wz = _cross(ux, uy, uz, vx, vy, vz)
+    return (
+        _dot(wx, wy, wz, tx, ty, tz),
+        _dot(ux, uy, uz, tx, ty, tz),
+        _dot(vx, vy, vz, tx, ty, tz),
+    )
 
 
 @njit(cache=True, nogil=True)
@@ -181,19 +194,9 @@ def _fast_code(
     sy = -dy if swap else dy
     sz = -dz if swap else dz
     f3 = -a2 if swap else a1
-    vx = sy * uz - sz * uy
-    vy = sz * ux - sx * uz
-    vz = sx * uy - sy * ux
+    vx, vy, vz = _cross(sx, sy, sz, ux, uy, uz)
     v_norm = np.float32(math.sqrt(_dot(vx, vy, vz, vx, vy, vz)))
-    vx = vx / v_norm
-    vy = vy / v_norm
-    vz = vz / v_norm
-    wx = uy * vz - uz * vy
-    wy = uz * vx - ux * vz
-    wz = ux * vy - uy * vx
-    f2 = _dot(vx, vy, vz, tx, ty, tz)
-    fy = _dot(wx, wy, wz, tx, ty, tz)
-    fx = _dot(ux, uy, uz, tx, ty, tz)
+    fy, fx, f2 = _frame_angles(ux, uy, uz, tx, ty, tz, vx, vy, vz, v_norm)
     # f2, f3 as _bin_cosine; f1 as _bin_theta's polynomial
     g2 = np.floor(nb * ((np.float64(f2) + 1.0) * 0.5))
     g3 = np.floor(nb * ((np.float64(f3) + 1.0) * 0.5))
