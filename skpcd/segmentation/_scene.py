@@ -331,76 +331,27 @@ def segment_scene(
     >>> seg.kinds.tolist()
     ['object', 'object']
     """
-    if denoise is not None and tile_size is not None:
-        raise ValueError(
-            "denoise is not available with tile_size; remove the outliers "
-            "from the scan beforehand"
-        )
-    if isinstance(structures, dict):
-        unknown = sorted(set(structures) - set(STRUCTURE_DEFAULTS))
-        if unknown:
-            raise ValueError(
-                f"unknown structures parameter(s) {unknown}; known: "
-                f"{sorted(STRUCTURE_DEFAULTS)}"
-            )
-    scan = None
-    if ground == "auto" and tile_size is not None:
-        scan = describe_scan(
-            _scan_sample(points, random_state), sensor=sensor, random_state=random_state
-        )
-        ground = "aerial" if scan.kind == "airborne" else "mobile"
+    _check_options(denoise, tile_size, structures)
+    clustering = {
+        "method": method, "eps": eps, "eps_scale": eps_scale,
+        "min_samples": min_samples, "min_cluster_size": min_cluster_size,
+        "max_cluster_size": max_cluster_size, "random_state": random_state,
+        "n_jobs": n_jobs,
+    }  # fmt: skip
     if tile_size is not None:
-        filt = _ground_filter(ground, n_jobs)
-        if ground is not None:
-            filt._validate_params()
-            if filt.method != "smrf":
-                raise ValueError(
-                    f"ground={ground!r} uses the cloth simulation filter, which "
-                    "simulates the whole scene at once: tile by tile it would "
-                    "not give the in-memory result. With tile_size pass "
-                    "ground='mobile' or 'aerial' (SMRF, exact tile by tile), "
-                    "or segment in memory"
-                )
-        if structures is not False:
-            raise ValueError(
-                "structures (facades, wires, trunk splitting) are found from "
-                "pieces of any size: tile by tile they would not give the "
-                "in-memory result. With tile_size pass structures=False, or "
-                "segment in memory"
-            )
-        labels, is_ground, used = segment_tiled(
-            points,
-            tile_size=float(tile_size),
-            tile_buffer=tile_buffer,
-            ground=filt,
-            method=method,
-            eps=None if eps is None else float(eps),
-            min_samples=min_samples,
-            eps_scale=eps_scale,
-            min_cluster_size=min_cluster_size,
-            max_cluster_size=max_cluster_size,
-            random_state=random_state,
-            n_jobs=n_jobs,
-            temp_folder=temp_folder,
-        )
-        return _with_kinds(labels, is_ground, used)._replace(
-            scan=scan, ground_filter=ground if isinstance(ground, str) else None
-        )
+        return _segment_in_tiles(
+            points, ground, sensor, structures, (tile_size, tile_buffer, temp_folder),
+            clustering,
+        )  # fmt: skip
     if isinstance(points, (str, os.PathLike)):
         points = read_point_cloud(points)
     xyz = check_scene(points)
     keep = None
     if denoise is not None:
-        if isinstance(denoise, str):
-            named = {
-                "statistical": StatisticalOutlierFilter,
-                "radius": RadiusOutlierFilter,
-            }
-            denoiser = named[denoise](n_jobs=n_jobs)
-        else:
-            denoiser = clone(denoise)
-        keep = np.flatnonzero(np.asarray(denoiser.fit_predict(xyz)) == 1)
-        full, xyz = len(xyz), np.ascontiguousarray(xyz[keep])
+        full = len(xyz)
+        keep = _inliers(xyz, denoise, n_jobs)
+        xyz = np.ascontiguousarray(xyz[keep])
+    scan = None
     if ground == "auto":
         defaults = SCAN_KINDS["spinning"]  # too few points to tell
         if len(xyz) >= 13:
@@ -413,34 +364,10 @@ def segment_scene(
     )
     sweep = None
     if scan is not None and eps is None and method == "dbscan":
-        max_eps = SCAN_KINDS[scan.kind].get("max_eps")
-        rest = xyz[~is_ground]
-        if max_eps is not None and len(rest) >= 2:
-            eps = min(
-                estimate_eps(
-                    rest, eps_scale=eps_scale, random_state=random_state, n_jobs=n_jobs
-                ),
-                max_eps,
-            )
-            scale = SCAN_KINDS[scan.kind].get("relative_eps_scale")
-            if scale is not None:
-                z0 = float(
-                    np.median(xyz[is_ground, 2])
-                    if is_ground.any()
-                    else rest[:, 2].min()
-                )
-                relative = estimate_eps(
-                    sweep_coordinates(rest, scan.centre, z0),
-                    eps_scale=scale,
-                    random_state=random_state,
-                    n_jobs=n_jobs,
-                )
-                sweep = (scan.centre, z0, relative)
+        eps, sweep = _radius_of_kind(xyz, is_ground, scan, clustering)
     seg = _cluster_rest(
-        xyz, is_ground, method=method, eps=eps, eps_scale=eps_scale,
-        min_samples=min_samples, min_cluster_size=min_cluster_size,
-        max_cluster_size=max_cluster_size, random_state=random_state,
-        n_jobs=n_jobs, structures=structures, sweep=sweep,
+        xyz, is_ground, **{**clustering, "eps": eps}, structures=structures,
+        sweep=sweep,
     )  # fmt: skip
     seg = seg._replace(
         scan=scan, ground_filter=ground if isinstance(ground, str) else None
@@ -452,6 +379,102 @@ def segment_scene(
     is_ground = np.zeros(full, dtype=bool)
     is_ground[keep] = seg.ground
     return seg._replace(labels=labels, ground=is_ground)
+
+
+def _check_options(denoise, tile_size, structures):
+    """The errors of option combinations that segment_scene refuses."""
+    if denoise is not None and tile_size is not None:
+        raise ValueError(
+            "denoise is not available with tile_size; remove the outliers "
+            "from the scan beforehand"
+        )
+    if isinstance(structures, dict):
+        unknown = sorted(set(structures) - set(STRUCTURE_DEFAULTS))
+        if unknown:
+            raise ValueError(
+                f"unknown structures parameter(s) {unknown}; known: "
+                f"{sorted(STRUCTURE_DEFAULTS)}"
+            )
+
+
+def _segment_in_tiles(points, ground, sensor, structures, tiling, clustering):
+    """segment_scene with ``tiling = (tile_size, tile_buffer, temp_folder)``
+    (see its Notes)."""
+    tile_size, tile_buffer, temp = tiling
+    scan = None
+    if ground == "auto":
+        sample = _scan_sample(points, clustering["random_state"])
+        scan = describe_scan(
+            sample, sensor=sensor, random_state=clustering["random_state"]
+        )
+        ground = "aerial" if scan.kind == "airborne" else "mobile"
+    filt = _ground_filter(ground, clustering["n_jobs"])
+    if ground is not None:
+        filt._validate_params()
+        if filt.method != "smrf":
+            raise ValueError(
+                f"ground={ground!r} uses the cloth simulation filter, which "
+                "simulates the whole scene at once: tile by tile it would "
+                "not give the in-memory result. With tile_size pass "
+                "ground='mobile' or 'aerial' (SMRF, exact tile by tile), "
+                "or segment in memory"
+            )
+    if structures is not False:
+        raise ValueError(
+            "structures (facades, wires, trunk splitting) are found from "
+            "pieces of any size: tile by tile they would not give the "
+            "in-memory result. With tile_size pass structures=False, or "
+            "segment in memory"
+        )
+    eps = clustering["eps"]
+    labels, is_ground, used = segment_tiled(
+        points,
+        tile_size=float(tile_size),
+        tile_buffer=tile_buffer,
+        ground=filt,
+        **{**clustering, "eps": None if eps is None else float(eps)},
+        temp_folder=temp,
+    )
+    return _with_kinds(labels, is_ground, used)._replace(
+        scan=scan, ground_filter=ground if isinstance(ground, str) else None
+    )
+
+
+def _inliers(xyz, denoise, n_jobs):
+    """Indices of the points that the ``denoise`` filter keeps."""
+    if isinstance(denoise, str):
+        named = {"statistical": StatisticalOutlierFilter, "radius": RadiusOutlierFilter}
+        denoiser = named[denoise](n_jobs=n_jobs)
+    else:
+        denoiser = clone(denoise)
+    return np.flatnonzero(np.asarray(denoiser.fit_predict(xyz)) == 1)
+
+
+def _radius_of_kind(xyz, is_ground, scan, clustering):
+    """The automatic radius of a street scan's kind: the estimate capped at
+    the kind's ``max_eps``, and for a single sweep the relative radius in
+    sweep coordinates, ``(centre, z0, relative)``; ``(None, None)`` for a
+    kind without a cap."""
+    kind = SCAN_KINDS[scan.kind]
+    rest = xyz[~is_ground]
+    if kind.get("max_eps") is None or len(rest) < 2:
+        return None, None
+    seed, n_jobs = clustering["random_state"], clustering["n_jobs"]
+    eps = estimate_eps(
+        rest, eps_scale=clustering["eps_scale"], random_state=seed, n_jobs=n_jobs
+    )
+    eps = min(eps, kind["max_eps"])
+    scale = kind.get("relative_eps_scale")
+    if scale is None:
+        return eps, None
+    z0 = float(np.median(xyz[is_ground, 2]) if is_ground.any() else rest[:, 2].min())
+    relative = estimate_eps(
+        sweep_coordinates(rest, scan.centre, z0),
+        eps_scale=scale,
+        random_state=seed,
+        n_jobs=n_jobs,
+    )
+    return eps, (scan.centre, z0, relative)
 
 
 def _ground_filter(ground, n_jobs):
