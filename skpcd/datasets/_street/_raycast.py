@@ -324,6 +324,16 @@ def intersect(kind, params, i, ox, oy, oz, dx, dy, dz, tmin, tmax, seed, ray):
 # the grid
 
 
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
+def _cell_span(aabb, i, x0, y0, cell, nx, ny):
+    """The first and last cells (x, then y) that box ``i`` overlaps."""
+    ix0 = min(max(int((aabb[i, 0] - x0) / cell), 0), nx - 1)
+    ix1 = min(max(int((aabb[i, 3] - x0) / cell), 0), nx - 1)
+    iy0 = min(max(int((aabb[i, 1] - y0) / cell), 0), ny - 1)
+    iy1 = min(max(int((aabb[i, 4] - y0) / cell), 0), ny - 1)
+    return ix0, ix1, iy0, iy1
+
+
 @njit(cache=True, nogil=True)
 def grid_cells(aabb, in_grid, x0, y0, cell, nx, ny):
     """CSR lists of the primitives whose bounding box overlaps each cell.
@@ -336,39 +346,36 @@ def grid_cells(aabb, in_grid, x0, y0, cell, nx, ny):
     """
     m = aabb.shape[0]
     start = np.zeros(nx * ny + 1, dtype=np.int64)
-    for i in range(m):
-        if not in_grid[i]:
-            continue
-        ix0 = min(max(int((aabb[i, 0] - x0) / cell), 0), nx - 1)
-        ix1 = min(max(int((aabb[i, 3] - x0) / cell), 0), nx - 1)
-        iy0 = min(max(int((aabb[i, 1] - y0) / cell), 0), ny - 1)
-        iy1 = min(max(int((aabb[i, 4] - y0) / cell), 0), ny - 1)
-        for iy in range(iy0, iy1 + 1):
-            for ix in range(ix0, ix1 + 1):
-                start[iy * nx + ix + 1] += 1
-    for c in range(nx * ny):
-        start[c + 1] += start[c]
-    fill = start[:-1].copy()
-    items = np.empty(start[-1], dtype=np.int64)
-    boxes = np.empty((start[-1], 6))
+    fill = start[:-1]
+    items = np.empty(0, dtype=np.int64)
+    boxes = np.empty((0, 6))
     zrange = np.empty((nx * ny, 2))
     zrange[:, 0] = np.inf
     zrange[:, 1] = -np.inf
-    for i in range(m):
-        if not in_grid[i]:
-            continue
-        ix0 = min(max(int((aabb[i, 0] - x0) / cell), 0), nx - 1)
-        ix1 = min(max(int((aabb[i, 3] - x0) / cell), 0), nx - 1)
-        iy0 = min(max(int((aabb[i, 1] - y0) / cell), 0), ny - 1)
-        iy1 = min(max(int((aabb[i, 4] - y0) / cell), 0), ny - 1)
-        for iy in range(iy0, iy1 + 1):
-            for ix in range(ix0, ix1 + 1):
-                c = iy * nx + ix
-                items[fill[c]] = i
-                boxes[fill[c]] = aabb[i]
-                fill[c] += 1
-                zrange[c, 0] = min(zrange[c, 0], aabb[i, 2])
-                zrange[c, 1] = max(zrange[c, 1], aabb[i, 5])
+    # the same walk over the cells of each box twice: to count the items of
+    # each cell, then to place them
+    for place in (False, True):
+        if place:
+            for c in range(nx * ny):
+                start[c + 1] += start[c]
+            fill = start[:-1].copy()
+            items = np.empty(start[-1], dtype=np.int64)
+            boxes = np.empty((start[-1], 6))
+        for i in range(m):
+            if not in_grid[i]:
+                continue
+            ix0, ix1, iy0, iy1 = _cell_span(aabb, i, x0, y0, cell, nx, ny)
+            for iy in range(iy0, iy1 + 1):
+                for ix in range(ix0, ix1 + 1):
+                    c = iy * nx + ix
+                    if not place:
+                        start[c + 1] += 1
+                        continue
+                    items[fill[c]] = i
+                    boxes[fill[c]] = aabb[i]
+                    fill[c] += 1
+                    zrange[c, 0] = min(zrange[c, 0], aabb[i, 2])
+                    zrange[c, 1] = max(zrange[c, 1], aabb[i, 5])
     return start, items, boxes, zrange
 
 
@@ -386,44 +393,34 @@ def _clip(o, d, lo, hi, t0, t1):
 
 
 @njit(cache=True, nogil=True, _nrt=False, inline="always")
+def _axis_span(lo, hi, o, inv, t0, t1):
+    """``[t0, t1]`` cut to where the ray (inverse direction ``inv``) is in [lo, hi]."""
+    ta = (lo - o) * inv
+    tb = (hi - o) * inv
+    if ta > tb:
+        ta, tb = tb, ta
+    return max(t0, ta), min(t1, tb)
+
+
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
+def _aabb_span(boxes, j, ox, oy, oz, ix, iy, iz, t0, t1):
+    """``[t0, t1]`` cut to where the ray is in box j (empty if ``t0 > t1``)."""
+    t0, t1 = _axis_span(boxes[j, 0], boxes[j, 3], ox, ix, t0, t1)
+    t0, t1 = _axis_span(boxes[j, 1], boxes[j, 4], oy, iy, t0, t1)
+    return _axis_span(boxes[j, 2], boxes[j, 5], oz, iz, t0, t1)
+
+
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
 def _box_overlap(boxes, j, ox, oy, oz, ix, iy, iz, t0, t1):
     """Does the ray (inverse direction ix, iy, iz) meet box j within [t0, t1]?"""
-    ta = (boxes[j, 0] - ox) * ix
-    tb = (boxes[j, 3] - ox) * ix
-    if ta > tb:
-        ta, tb = tb, ta
-    t0 = max(t0, ta)
-    t1 = min(t1, tb)
-    ta = (boxes[j, 1] - oy) * iy
-    tb = (boxes[j, 4] - oy) * iy
-    if ta > tb:
-        ta, tb = tb, ta
-    t0 = max(t0, ta)
-    t1 = min(t1, tb)
-    ta = (boxes[j, 2] - oz) * iz
-    tb = (boxes[j, 5] - oz) * iz
-    if ta > tb:
-        ta, tb = tb, ta
-    t0 = max(t0, ta)
-    t1 = min(t1, tb)
+    t0, t1 = _aabb_span(boxes, j, ox, oy, oz, ix, iy, iz, t0, t1)
     return t0 <= t1
 
 
 @njit(cache=True, nogil=True, _nrt=False, inline="always")
 def _box_exit(boxes, j, ox, oy, oz, ix, iy, iz, t0, t1):
     """Where the ray leaves box j within [t0, t1], or -1 if it misses it."""
-    ta = (boxes[j, 0] - ox) * ix
-    tb = (boxes[j, 3] - ox) * ix
-    t0 = max(t0, min(ta, tb))
-    t1 = min(t1, max(ta, tb))
-    ta = (boxes[j, 1] - oy) * iy
-    tb = (boxes[j, 4] - oy) * iy
-    t0 = max(t0, min(ta, tb))
-    t1 = min(t1, max(ta, tb))
-    ta = (boxes[j, 2] - oz) * iz
-    tb = (boxes[j, 5] - oz) * iz
-    t0 = max(t0, min(ta, tb))
-    t1 = min(t1, max(ta, tb))
+    t0, t1 = _aabb_span(boxes, j, ox, oy, oz, ix, iy, iz, t0, t1)
     return t1 if t0 <= t1 else -1.0
 
 
@@ -439,67 +436,40 @@ def _try(kind, params, hit, i, ox, oy, oz, dx, dy, dz, tmin, best, seed, ray):
 
 
 @njit(cache=True, nogil=True, _nrt=False, inline="always")
+def _axis_enter(o, d, t, lo, cell, n):
+    """One axis of the grid walk at distance t: cell, step, next crossing, its step."""
+    c = min(max(int((o + t * d - lo) / cell), 0), n - 1)
+    if d > _EPS:
+        return c, 1, (lo + (c + 1) * cell - o) / d, cell / d
+    if d < -_EPS:
+        return c, -1, (lo + c * cell - o) / d, -cell / d
+    return c, 0, np.inf, np.inf
+
+
+@njit(cache=True, nogil=True, _nrt=False, inline="always")
 def _enter(ox, oy, dx, dy, t, x0, y0, cell, nx, ny):
     """Grid walk state at distance t: cell, steps, next crossings, their steps."""
-    cx = min(max(int((ox + t * dx - x0) / cell), 0), nx - 1)
-    cy = min(max(int((oy + t * dy - y0) / cell), 0), ny - 1)
-    if dx > _EPS:
-        sx, nxt_x, dtx = 1, (x0 + (cx + 1) * cell - ox) / dx, cell / dx
-    elif dx < -_EPS:
-        sx, nxt_x, dtx = -1, (x0 + cx * cell - ox) / dx, -cell / dx
-    else:
-        sx, nxt_x, dtx = 0, np.inf, np.inf
-    if dy > _EPS:
-        sy, nxt_y, dty = 1, (y0 + (cy + 1) * cell - oy) / dy, cell / dy
-    elif dy < -_EPS:
-        sy, nxt_y, dty = -1, (y0 + cy * cell - oy) / dy, -cell / dy
-    else:
-        sy, nxt_y, dty = 0, np.inf, np.inf
+    cx, sx, nxt_x, dtx = _axis_enter(ox, dx, t, x0, cell, nx)
+    cy, sy, nxt_y, dty = _axis_enter(oy, dy, t, y0, cell, ny)
     return cx, cy, sx, sy, nxt_x, nxt_y, dtx, dty
 
 
 @njit(cache=True, nogil=True, _nrt=False, inline="always")
-def cast(
-    ox,
-    oy,
-    oz,
-    dx,
-    dy,
-    dz,
-    tmin,
-    tmax,
-    kind,
-    params,
-    hit,
-    aabb,
-    glob,
-    bounds,
-    cell,
-    nx,
-    ny,
-    start,
-    items,
-    boxes,
-    zrange,
-    coarse,
-    ncx,
-    czrange,
-    ahead,
-    mailbox,
-    ray,
-    seed,
-):
+def cast(ox, oy, oz, dx, dy, dz, tmin, tmax, world, mailbox, ray, seed):
     """First primitive the ray meets in (tmin, tmax): ``(index, t)``, or (-1, inf).
 
+    ``world`` is the tuple of the scene's arrays and its grid, in the
+    order of the unpacking below (``_scanners._scene_arrays`` builds it).
     The primitives ``glob`` (the ground profile and other large ones, met
     by most rays) are tested first, which bounds the walk through the grid.
     ``bounds`` is ``(x0, y0, z0, x1, y1, z1)`` of the grid (z: of all the
     primitives); ``mailbox[i] == ray`` marks primitives already tested.
     Blocks of ``2**coarse`` x ``2**coarse`` cells (``ncx`` along x) have
-    the z range
-    of their items in ``czrange``: a ray passing above or below it crosses
-    the block in one step (rays to the sky walk few cells).
+    the z range of their items in ``czrange``: a ray passing above or below
+    it crosses the block in one step (rays to the sky walk few cells).
     """
+    kind, params, hit, aabb, glob, bounds, cell, nx, ny = world[:9]
+    start, items, boxes, zrange, coarse, ncx, czrange, ahead = world[9:]
     # inverse directions for the box tests (a huge number for a zero component)
     ix = 1.0 / dx if abs(dx) > _EPS else 1e300 * (1.0 if dx >= 0 else -1.0)
     iy = 1.0 / dy if abs(dy) > _EPS else 1e300 * (1.0 if dy >= 0 else -1.0)
@@ -698,50 +668,14 @@ def _gauss(gauss, h, shift):
 # inlined into the loop (another third), the intersections are not (they
 # would multiply the compile time by five for a few per cent).
 @njit(cache=True, nogil=True, _nrt=False)
-def simulate(
-    code,
-    fp,
-    fa,
-    ft,
-    gauss,
-    k0,
-    k1,
-    seed,
-    min_range,
-    max_range,
-    noise,
-    divergence,
-    drop,
-    kind,
-    params,
-    hit,
-    aabb,
-    glob,
-    bounds,
-    cell,
-    nx,
-    ny,
-    start,
-    items,
-    boxes,
-    zrange,
-    coarse,
-    ncx,
-    czrange,
-    ahead,
-    mailbox,
-    interest,
-    out_xyz,
-    out_prim,
-    out_range,
-    out_time,
-    out_channel,
-    out_return,
-    max_returns,
-    separation,
-):
+def simulate(pattern, beam, gauss, k0, k1, seed, world, mailbox, interest, out):
     """Cast pulses ``k0 .. k1 - 1``; returns the number of returns written.
 
+    ``pattern`` is ``(code, fp, fa, ft)`` (see :func:`pulse_ray`), ``beam``
+    ``(min_range, max_range, noise, divergence, drop, max_returns,
+    separation)``, ``world`` the scene and its grid (see :func:`cast`) and
+    ``out`` the arrays ``(xyz, prim, range, time, channel, return)`` the
+    returns are written to.
     Each ray's direction is jittered by ``divergence`` (standard deviation,
     radians, per axis), its first hit within ``[min_range, max_range]`` kept
     with probability ``1 - drop`` and its range perturbed by Gaussian
@@ -757,6 +691,10 @@ def simulate(
     the last box they cross: exact for whatever lies inside the boxes (the
     objects :func:`~skpcd.datasets.make_street_objects` keeps).
     """
+    code, fp, fa, ft = pattern
+    min_range, max_range, noise, divergence, drop, max_returns, separation = beam
+    out_xyz, out_prim, out_range, out_time, out_channel, out_return = out
+    hit = world[2]
     n = 0
     n_interest = interest.shape[0]
     for k in range(k0, k1):
@@ -801,34 +739,7 @@ def simulate(
         ray_id = k
         for r in range(max_returns):
             i, t = cast(
-                ox,
-                oy,
-                oz,
-                dx,
-                dy,
-                dz,
-                t_from,
-                t_end,
-                kind,
-                params,
-                hit,
-                aabb,
-                glob,
-                bounds,
-                cell,
-                nx,
-                ny,
-                start,
-                items,
-                boxes,
-                zrange,
-                coarse,
-                ncx,
-                czrange,
-                ahead,
-                mailbox,
-                ray_id,
-                seed,
+                ox, oy, oz, dx, dy, dz, t_from, t_end, world, mailbox, ray_id, seed
             )
             if i < 0:
                 break
@@ -859,68 +770,17 @@ def simulate(
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def cast_rays(
-    origins,
-    directions,
-    tmin,
-    tmax,
-    seed,
-    kind,
-    params,
-    hit,
-    aabb,
-    glob,
-    bounds,
-    cell,
-    nx,
-    ny,
-    start,
-    items,
-    boxes,
-    zrange,
-    coarse,
-    ncx,
-    czrange,
-    ahead,
-    mailbox,
-    out_prim,
-    out_t,
-):
+def cast_rays(origins, directions, tmin, tmax, seed, world, mailbox, out_prim, out_t):
     """First hit of each given ray (unit directions): primitive and distance.
 
-    Ray ``r`` has id ``r`` for the hit-probability draws; ``out_prim`` is -1
-    and ``out_t`` inf where nothing is hit within ``(tmin, tmax)``.
+    ``world`` is the scene and its grid (see :func:`cast`). Ray ``r`` has
+    id ``r`` for the hit-probability draws; ``out_prim`` is -1 and ``out_t``
+    inf where nothing is hit within ``(tmin, tmax)``.
     """
     for r in range(origins.shape[0]):
+        o, d = origins[r], directions[r]
         i, t = cast(
-            origins[r, 0],
-            origins[r, 1],
-            origins[r, 2],
-            directions[r, 0],
-            directions[r, 1],
-            directions[r, 2],
-            tmin,
-            tmax,
-            kind,
-            params,
-            hit,
-            aabb,
-            glob,
-            bounds,
-            cell,
-            nx,
-            ny,
-            start,
-            items,
-            boxes,
-            zrange,
-            coarse,
-            ncx,
-            czrange,
-            ahead,
-            mailbox,
-            r,
-            seed,
+            o[0], o[1], o[2], d[0], d[1], d[2], tmin, tmax, world, mailbox, r, seed
         )
         out_prim[r] = i
         out_t[r] = t if i >= 0 else np.inf

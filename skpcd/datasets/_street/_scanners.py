@@ -2,7 +2,7 @@
 
 ``SCAN_PATTERNS`` holds the default numbers of each pattern;
 :func:`plan_scan` turns a pattern, its overrides and a street into the
-arrays of :mod:`skpcd.datasets._street._scanner_kernels`, and :func:`scan`
+arrays of :mod:`skpcd.datasets._street._raycast`, and :func:`scan`
 casts every pulse against the packed scene, in chunks of constant memory.
 """
 
@@ -175,8 +175,8 @@ SCAN_PATTERNS = {
 
 
 def _scene_arrays(scene, grid):
-    """The scene's primitive arrays and its grid, in the order the casting
-    kernels take them."""
+    """The ``world`` of the casting kernels: the scene's primitive arrays
+    and its grid in one tuple, in the order ``_raycast.cast`` unpacks them."""
     return (
         scene["kind"],
         scene["params"],
@@ -575,59 +575,44 @@ def build_grid(scene, cell=1.0, global_cells=400, coarse=3):
 
 
 class _Buffers:
-    """Output arrays of one thread, reused from chunk to chunk."""
+    """Output arrays of one thread, reused from chunk to chunk.
+
+    ``out`` holds, for ``n`` returns, their ``xyz, primitive, range, time,
+    channel, return number`` in the order :func:`simulate` writes them.
+    """
 
     def __init__(self, n, n_prims):
-        self.xyz = np.empty((n, 3))
-        self.prim = np.empty(n, dtype=np.int64)
-        self.range = np.empty(n)
-        self.time = np.empty(n)
-        self.channel = np.empty(n, dtype=np.int64)
-        self.ret = np.empty(n, dtype=np.int64)
+        self.out = (
+            np.empty((n, 3)),
+            np.empty(n, dtype=np.int64),
+            np.empty(n),
+            np.empty(n),
+            np.empty(n, dtype=np.int64),
+            np.empty(n, dtype=np.int64),
+        )
         self.mailbox = np.full(n_prims, -1, dtype=np.int64)
 
 
 def _chunks(plan, conf, scene, grid, seed, drop, interest, spans, chunk):
     """Cast the pulses of the ``(k0, k1)`` spans one after the other."""
     buf = _Buffers(chunk * int(conf["max_returns"]), len(scene["kind"]))
+    pattern = (plan["code"], plan["fp"], plan["fa"], plan["ft"])
+    beam = (
+        float(conf["min_range"]),
+        float(conf["max_range"]),
+        float(conf["range_noise"]),
+        float(conf["beam_divergence"]),
+        float(drop),
+        int(conf["max_returns"]),
+        float(conf["return_separation"]),
+    )
+    world = _scene_arrays(scene, grid)
     out = []
     for k0, k1 in spans:
         m = simulate(
-            plan["code"],
-            plan["fp"],
-            plan["fa"],
-            plan["ft"],
-            _GAUSS,
-            k0,
-            k1,
-            seed,
-            float(conf["min_range"]),
-            float(conf["max_range"]),
-            float(conf["range_noise"]),
-            float(conf["beam_divergence"]),
-            float(drop),
-            *_scene_arrays(scene, grid),
-            buf.mailbox,
-            interest,
-            buf.xyz,
-            buf.prim,
-            buf.range,
-            buf.time,
-            buf.channel,
-            buf.ret,
-            int(conf["max_returns"]),
-            float(conf["return_separation"]),
+            pattern, beam, _GAUSS, k0, k1, seed, world, buf.mailbox, interest, buf.out
         )
-        out.append(
-            (
-                buf.xyz[:m].copy(),
-                buf.prim[:m].copy(),
-                buf.range[:m].copy(),
-                buf.time[:m].copy(),
-                buf.channel[:m].copy(),
-                buf.ret[:m].copy(),
-            )
-        )
+        out.append(tuple(a[:m].copy() for a in buf.out))
     return out
 
 
@@ -692,7 +677,7 @@ def first_hits(scene, origins, directions, *, tmin=0.0, tmax=np.inf, seed=0, gri
         float(tmin),
         float(min(tmax, 1e30)),
         int(seed),
-        *_scene_arrays(scene, grid),
+        _scene_arrays(scene, grid),
         np.full(len(scene["kind"]), -1, dtype=np.int64),
         prim,
         t,
