@@ -395,45 +395,24 @@ def tree(rng):
     }
 
 
+# the kinds of car: the ranges of their length, width, body height and cabin
+# height (m; a van's body is its cabin, and it has none above), their ground
+# clearance (m), the cabin's length and its shift from the middle, as
+# fractions of the length
+_CARS = {
+    "sedan": (4.3, 5.0, 1.72, 1.88, 0.55, 0.7, 0.42, 0.52, 0.16, 0.48, -0.04),
+    "hatchback": (3.6, 4.2, 1.62, 1.78, 0.55, 0.7, 0.45, 0.55, 0.15, 0.56, -0.1),
+    "suv": (4.4, 4.9, 1.82, 2.0, 0.75, 0.9, 0.5, 0.62, 0.22, 0.6, -0.08),
+    "van": (4.8, 5.8, 1.9, 2.05, 1.55, 2.0, 0.0, 0.0, 0.2, 0.0, 0.0),
+}
+
+
 def car(rng):
     """A parked car: body, cabin with glass, roof, wheels (``+x`` its length)."""
     kind = _pick(rng, ("sedan", "hatchback", "suv", "van"), p=(0.4, 0.3, 0.2, 0.1))
-    if kind == "sedan":
-        L, W, body, cabin, clear = (
-            _u(rng, 4.3, 5.0),
-            _u(rng, 1.72, 1.88),
-            _u(rng, 0.55, 0.7),
-            _u(rng, 0.42, 0.52),
-            0.16,
-        )
-        cab_len, shift = 0.48, -0.04
-    elif kind == "hatchback":
-        L, W, body, cabin, clear = (
-            _u(rng, 3.6, 4.2),
-            _u(rng, 1.62, 1.78),
-            _u(rng, 0.55, 0.7),
-            _u(rng, 0.45, 0.55),
-            0.15,
-        )
-        cab_len, shift = 0.56, -0.1
-    elif kind == "suv":
-        L, W, body, cabin, clear = (
-            _u(rng, 4.4, 4.9),
-            _u(rng, 1.82, 2.0),
-            _u(rng, 0.75, 0.9),
-            _u(rng, 0.5, 0.62),
-            0.22,
-        )
-        cab_len, shift = 0.6, -0.08
-    else:
-        L, W, body, cabin, clear = (
-            _u(rng, 4.8, 5.8),
-            _u(rng, 1.9, 2.05),
-            _u(rng, 1.55, 2.0),
-            0.0,
-            0.2,
-        )
-        cab_len, shift = 0.0, 0.0
+    l0, l1, w0, w1, b0, b1, c0, c1, clear, cab_len, shift = _CARS[kind]
+    L, W, body = _u(rng, l0, l1), _u(rng, w0, w1), _u(rng, b0, b1)
+    cabin = _u(rng, c0, c1) if c1 > 0 else 0.0
     glass = _u(rng, 0.35, 0.65)
     parts = Parts()
     zb = clear + body / 2
