@@ -20,6 +20,7 @@ from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import _num_samples, check_is_fitted
 
 from skpcd.classification._street import make_street_pipeline
+from skpcd.classification._wrapped import _WrappedClassifierMixin
 from skpcd.datasets import STREET_OBJECT_CLASSES, make_street_objects
 
 __all__ = ["AUGMENT_SCANNERS", "SimulationAugmented", "simulate_objects"]
@@ -76,7 +77,9 @@ def _takes_weight(estimator):
     return kwargs and inner is not None and _takes_weight(inner)
 
 
-class SimulationAugmented(MetaEstimatorMixin, ClassifierMixin, BaseEstimator):
+class SimulationAugmented(
+    _WrappedClassifierMixin, MetaEstimatorMixin, ClassifierMixin, BaseEstimator
+):
     """Train on a few real labelled segments plus simulated ones of their classes.
 
     A model fitted on a handful of real objects per class has seen too few
@@ -224,8 +227,7 @@ class SimulationAugmented(MetaEstimatorMixin, ClassifierMixin, BaseEstimator):
         self.scanner_, self.scanner_scores_, self.n_simulated_ = None, {}, 0
         weight = np.full(len(y), float(self.real_weight))
         if not known:  # nothing to weigh the real objects against
-            self.estimator_ = self._base().fit(X, y)
-            return self._fitted()
+            return self._adopt(self._base().fit(X, y))
         seed = int(check_random_state(self.random_state).randint(2**31 - 1))
         candidates = AUGMENT_SCANNERS if self.scanner == "auto" else (self.scanner,)
         pools = {
@@ -243,14 +245,7 @@ class SimulationAugmented(MetaEstimatorMixin, ClassifierMixin, BaseEstimator):
         self.scanner_, self.n_simulated_ = scanner, len(sim_y)
         both_y = np.concatenate([y.astype(object), sim_y])
         weights = np.concatenate([weight, np.ones(len(sim_y))])
-        self.estimator_ = _fit_weighted(self._base(), [*X, *sim_X], both_y, weights)
-        return self._fitted()
-
-    def _fitted(self):
-        self.classes_ = self.estimator_.classes_
-        if hasattr(self.estimator_, "n_features_in_"):
-            self.n_features_in_ = self.estimator_.n_features_in_
-        return self
+        return self._adopt(_fit_weighted(self._base(), [*X, *sim_X], both_y, weights))
 
     def _transfer(self, pool, X, y):
         """Balanced accuracy on the real objects of a model of ``pool`` alone."""
@@ -276,22 +271,10 @@ class SimulationAugmented(MetaEstimatorMixin, ClassifierMixin, BaseEstimator):
         check_is_fitted(self)
         return self.estimator_.predict(X)
 
-    @available_if(lambda self: hasattr(self._base(), "predict_proba"))
-    def predict_proba(self, X):
-        """Class probabilities of each sample, in the order of ``classes_``.
-
-        Parameters
-        ----------
-        X : list of array-like
-            The samples.
-
-        Returns
-        -------
-        proba : ndarray of shape (n_samples, n_classes)
-            The probabilities of the fitted estimator.
-        """
-        check_is_fitted(self)
-        return self.estimator_.predict_proba(X)
+    # the wrapped estimator's, when the estimator has them
+    predict_proba = available_if(lambda self: hasattr(self._base(), "predict_proba"))(
+        _WrappedClassifierMixin.predict_proba
+    )
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()

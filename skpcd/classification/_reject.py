@@ -13,7 +13,8 @@ from sklearn.base import (
 )
 from sklearn.utils import get_tags
 from sklearn.utils._param_validation import HasMethods, Interval
-from sklearn.utils.validation import check_is_fitted
+
+from skpcd.classification._wrapped import _WrappedClassifierMixin
 
 __all__ = ["RejectUnknown"]
 
@@ -37,7 +38,9 @@ def _with_unknown(pred, unknown):
     return pred.astype(object)  # e.g. integer classes and a string label
 
 
-class RejectUnknown(MetaEstimatorMixin, ClassifierMixin, BaseEstimator):
+class RejectUnknown(
+    _WrappedClassifierMixin, MetaEstimatorMixin, ClassifierMixin, BaseEstimator
+):
     """Answer "unknown" where a classifier's best class probability is low.
 
     Wraps a classifier with ``predict_proba``: :meth:`predict` gives its
@@ -133,33 +136,14 @@ class RejectUnknown(MetaEstimatorMixin, ClassifierMixin, BaseEstimator):
         self : RejectUnknown
             The fitted estimator.
         """
-        self.estimator_ = clone(self.estimator).fit(X, y, **fit_params)
-        self.classes_ = self.estimator_.classes_
+        self._adopt(clone(self.estimator).fit(X, y, **fit_params))
         self.unknown_label_ = _unknown_label(self.classes_, self.unknown_label)
         if self.unknown_label_ in self.classes_.tolist():
             raise ValueError(
                 f"unknown_label={self.unknown_label_!r} is a training class; "
                 "pass another unknown_label"
             )
-        if hasattr(self.estimator_, "n_features_in_"):
-            self.n_features_in_ = self.estimator_.n_features_in_
         return self
-
-    def predict_proba(self, X):
-        """The classifier's class probabilities.
-
-        Parameters
-        ----------
-        X : array-like
-            What the classifier takes.
-
-        Returns
-        -------
-        proba : ndarray of shape (n_samples, n_classes)
-            Columns in the order of ``classes_``.
-        """
-        check_is_fitted(self)
-        return self.estimator_.predict_proba(X)
 
     def predict(self, X):
         """The most probable class, or ``unknown_label_`` below ``threshold``.
