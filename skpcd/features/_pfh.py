@@ -134,8 +134,8 @@ def compute_pfh(
     return _pfh_packed(p, n, nb, int(n_bins), n_threads)
 
 
-def _pfh_packed(p, n, nb, n_bins, n_threads, cloud_ptr=None, out=None):
-    """PFH kernel over float32 packed arrays (clouds at ``cloud_ptr``, in
+def _pfh_packed(p, n, nb, n_bins, n_threads, offsets=None, out=None):
+    """PFH kernel over float32 packed arrays (clouds at ``offsets``, in
     their local frames), into ``out`` (zeroed, float32) when given."""
     if out is None:
         out = unshared_zeros((len(p), n_bins**3), np.float32)
@@ -144,8 +144,8 @@ def _pfh_packed(p, n, nb, n_bins, n_threads, cloud_ptr=None, out=None):
         # large neighbourhoods: visited in space order, consecutive ones
         # share most of their pairs (pfh_rows_reuse)
         cloud = None
-        if cloud_ptr is not None and len(cloud_ptr) > 2:
-            cloud = np.repeat(np.arange(len(cloud_ptr) - 1), np.diff(cloud_ptr))
+        if offsets is not None and len(offsets) > 2:
+            cloud = np.repeat(np.arange(len(offsets) - 1), np.diff(offsets))
         rows = _space_order(p, _radius_of(p, nb), cloud, n_threads)
         sorted_nb = (np.empty((0, 3)), np.empty(0, np.int32))
         rows = (rows, np.empty(0, np.int64), *sorted_nb)

@@ -84,12 +84,12 @@ class VoxelGrid(typing.NamedTuple):
         return np.diff(self.cloud_cells)
 
 
-def grid_shape(xyz, cloud_ptr, h, lo_hi=None):
+def grid_shape(xyz, offsets, h, lo_hi=None):
     """Origins, cell sizes (at least ``h``, above the radius) and grid shapes.
 
     Returns ``origin (n_clouds, 3), h (n_clouds,), dims (n_clouds, 3)``.
     """
-    lo, hi = cloud_bounds(xyz, cloud_ptr) if lo_hi is None else lo_hi
+    lo, hi = cloud_bounds(xyz, offsets) if lo_hi is None else lo_hi
     extent = hi - lo
     # cells a hair wider than asked: a radius query's 27 cells cover the ball
     # whatever the rounding of cell coordinates
@@ -153,7 +153,7 @@ def argsort_keys(keys, n_threads=1):
     return src[1], src[0]
 
 
-def sort_points(xyz, cloud_ptr, origin, h, dims, n_threads=1):
+def sort_points(xyz, offsets, origin, h, dims, n_threads=1):
     """Points sorted by (cloud, cell key), and the cells.
 
     Returns ``order`` (point indices in that order) and the tuple
@@ -167,16 +167,16 @@ def sort_points(xyz, cloud_ptr, origin, h, dims, n_threads=1):
         # one sort: cloud c's keys shifted past the keys of the clouds before;
         # a radix sort, a few passes of 11 bits (3x faster than np.argsort)
         base = np.concatenate([[0], np.cumsum(np.prod(dims, axis=1))[:-1]])
-        keyed = (xyz, cloud_ptr, origin, h, dims, base, keys)
+        keyed = (xyz, offsets, origin, h, dims, base, keys)
         parallel_rows(g.cell_keys, n, n_threads, *keyed)
         order, keys = argsort_keys(keys, n_threads)
-        parallel_rows(g.shift_keys, n, n_threads, keys, cloud_ptr, base)
-        return order, g.sorted_cells(keys, cloud_ptr)
-    keyed = (xyz, cloud_ptr, origin, h, dims, np.zeros(0, np.int64), keys)
+        parallel_rows(g.shift_keys, n, n_threads, keys, offsets, base)
+        return order, g.sorted_cells(keys, offsets)
+    keyed = (xyz, offsets, origin, h, dims, np.zeros(0, np.int64), keys)
     parallel_rows(g.cell_keys, n, n_threads, *keyed)
-    cloud = np.repeat(np.arange(len(cloud_ptr) - 1), np.diff(cloud_ptr))
+    cloud = np.repeat(np.arange(len(offsets) - 1), np.diff(offsets))
     order = np.lexsort((keys, cloud))
-    return order, g.sorted_cells(keys[order], cloud_ptr)
+    return order, g.sorted_cells(keys[order], offsets)
 
 
 def gather_points(xyz, order, n_threads=1):
@@ -186,14 +186,14 @@ def gather_points(xyz, order, n_threads=1):
     return xs
 
 
-def build_grid(xyz, cloud_ptr, h, lo_hi=None, n_threads=1):
+def build_grid(xyz, offsets, h, lo_hi=None, n_threads=1):
     """The grid of cells at least ``h[c]`` wide over each cloud ``c``.
 
     Parameters
     ----------
     xyz : ndarray of shape (n_points, 3), float64, C-contiguous
         The packed clouds.
-    cloud_ptr : ndarray of shape (n_clouds + 1,), int64
+    offsets : ndarray of shape (n_clouds + 1,), int64
         Offsets of the clouds.
     h : ndarray of shape (n_clouds,)
         Smallest cell size of each cloud.
@@ -207,17 +207,17 @@ def build_grid(xyz, cloud_ptr, h, lo_hi=None, n_threads=1):
     -------
     grid : VoxelGrid
     """
-    origin, h, dims = grid_shape(xyz, cloud_ptr, h, lo_hi)
-    order, cells = sort_points(xyz, cloud_ptr, origin, h, dims, n_threads)
+    origin, h, dims = grid_shape(xyz, offsets, h, lo_hi)
+    order, cells = sort_points(xyz, offsets, origin, h, dims, n_threads)
     xs = gather_points(xyz, order, n_threads)
     return VoxelGrid(xs, order, *cells, origin, h, dims)
 
 
-def radius_grid(xyz, cloud_ptr, radius, lo_hi=None, n_threads=1):
+def radius_grid(xyz, offsets, radius, lo_hi=None, n_threads=1):
     """The grid of a radius search: cells at least ``radius`` wide, so that
     the points within ``radius`` of a point lie in the 27 cells around it."""
-    h = np.full(len(cloud_ptr) - 1, float(radius))
-    return build_grid(xyz, cloud_ptr, h, lo_hi, n_threads)
+    h = np.full(len(offsets) - 1, float(radius))
+    return build_grid(xyz, offsets, h, lo_hi, n_threads)
 
 
 def snake_order(points, h, cloud=None, n_threads=1):

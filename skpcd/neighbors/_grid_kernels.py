@@ -63,14 +63,14 @@ def borrow_grid(grid):
 
 
 @njit(cache=True, nogil=True)
-def cell_keys(lo, hi, xyz, cloud_ptr, origin, h, dims, base, keys):
+def cell_keys(lo, hi, xyz, offsets, origin, h, dims, base, keys):
     """Key of the cell of points ``lo`` to ``hi`` within their cloud, plus
     ``base[c]`` for cloud ``c`` (empty: nothing added), into ``keys``."""
     if hi <= lo:
         return
-    c = np.searchsorted(cloud_ptr, lo, side="right") - 1
+    c = np.searchsorted(offsets, lo, side="right") - 1
     for i in range(lo, hi):
-        while i >= cloud_ptr[c + 1]:
+        while i >= offsets[c + 1]:
             c += 1
         ix = _coord(xyz[i, 0], origin[c, 0], h[c], dims[c, 0])
         iy = _coord(xyz[i, 1], origin[c, 1], h[c], dims[c, 1])
@@ -81,20 +81,20 @@ def cell_keys(lo, hi, xyz, cloud_ptr, origin, h, dims, base, keys):
 
 
 @njit(cache=True, nogil=True)
-def sorted_cells(sorted_keys, cloud_ptr):
+def sorted_cells(sorted_keys, offsets):
     """Cells from the keys of the points sorted by (cloud, key).
 
     Returns ``(cell_cloud, cell_key, cell_start, cloud_cells)``: each cell's
     cloud and key, the start of its points in the sorted order, and the
     first cell of every cloud (``cloud_cells[-1]`` is the number of cells).
     Sorted by (cloud, key), the points of cloud ``c`` are at the positions
-    ``cloud_ptr[c]`` to ``cloud_ptr[c + 1]``.
+    ``offsets[c]`` to ``offsets[c + 1]``.
     """
-    n_clouds = len(cloud_ptr) - 1
+    n_clouds = len(offsets) - 1
     m = 0
     for c in range(n_clouds):
-        for t in range(cloud_ptr[c], cloud_ptr[c + 1]):
-            if t == cloud_ptr[c] or sorted_keys[t] != sorted_keys[t - 1]:
+        for t in range(offsets[c], offsets[c + 1]):
+            if t == offsets[c] or sorted_keys[t] != sorted_keys[t - 1]:
                 m += 1
     cell_cloud = np.empty(m, dtype=np.int64)
     cell_key = np.empty(m, dtype=np.int64)
@@ -103,14 +103,14 @@ def sorted_cells(sorted_keys, cloud_ptr):
     m = 0
     for c in range(n_clouds):
         cloud_cells[c] = m
-        for t in range(cloud_ptr[c], cloud_ptr[c + 1]):
-            if t == cloud_ptr[c] or sorted_keys[t] != sorted_keys[t - 1]:
+        for t in range(offsets[c], offsets[c + 1]):
+            if t == offsets[c] or sorted_keys[t] != sorted_keys[t - 1]:
                 cell_cloud[m] = c
                 cell_key[m] = sorted_keys[t]
                 cell_start[m] = t
                 m += 1
     cloud_cells[n_clouds] = m
-    cell_start[m] = cloud_ptr[n_clouds] if n_clouds else 0
+    cell_start[m] = offsets[n_clouds] if n_clouds else 0
     return cell_cloud, cell_key, cell_start, cloud_cells
 
 
@@ -226,13 +226,13 @@ def _insert(bd, bi, count, k, d2, j):
 
 
 @njit(cache=True, nogil=True)
-def knn_brute(lo, hi, which, cloud, xyz, cloud_ptr, indptr, indices, sqdist):
+def knn_brute(lo, hi, which, cloud, xyz, offsets, indptr, indices, sqdist):
     """k nearest neighbours of the points ``which[lo:hi]`` (of clouds
     ``cloud``) by scanning their whole cloud: for a few isolated points."""
     which = borrow(which)
     cloud = borrow(cloud)
     xyz = borrow(xyz)
-    cloud_ptr = borrow(cloud_ptr)
+    offsets = borrow(offsets)
     indptr = borrow(indptr)
     indices = borrow(indices)
     sqdist = borrow(sqdist)
@@ -250,7 +250,7 @@ def knn_brute(lo, hi, which, cloud, xyz, cloud_ptr, indptr, indices, sqdist):
         bd[0] = -1.0
         bi[0] = i
         count = 1
-        for j in range(cloud_ptr[c], cloud_ptr[c + 1]):
+        for j in range(offsets[c], offsets[c + 1]):
             if j != i:
                 ex = xyz[j, 0] - xyz[i, 0]
                 ey = xyz[j, 1] - xyz[i, 1]
@@ -750,13 +750,13 @@ def renumber_rows(lo, hi, order, inv, nb, new_indptr, new_indices, new_sqdist):
 
 
 @njit(cache=True, nogil=True)
-def shift_keys(lo, hi, keys, cloud_ptr, base):
+def shift_keys(lo, hi, keys, offsets, base):
     """Subtract ``base[c]`` from the keys ``lo`` to ``hi`` of cloud ``c``
-    (cloud ``c`` at ``cloud_ptr[c]`` to ``cloud_ptr[c + 1]``), in place."""
+    (cloud ``c`` at ``offsets[c]`` to ``offsets[c + 1]``), in place."""
     if hi <= lo:
         return
-    c = np.searchsorted(cloud_ptr, lo, side="right") - 1
+    c = np.searchsorted(offsets, lo, side="right") - 1
     for i in range(lo, hi):
-        while i >= cloud_ptr[c + 1]:
+        while i >= offsets[c + 1]:
             c += 1
         keys[i] -= base[c]

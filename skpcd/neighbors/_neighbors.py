@@ -285,7 +285,7 @@ def _check_search(n_neighbors, radius, algorithm):
 
 def search_packed(
     xyz,
-    cloud_ptr,
+    offsets,
     *,
     n_neighbors=None,
     radius=None,
@@ -299,8 +299,8 @@ def search_packed(
     Parameters
     ----------
     xyz : ndarray of shape (n_points, 3), float64, C-contiguous, finite
-        All points; cloud ``c`` is ``xyz[cloud_ptr[c]:cloud_ptr[c + 1]]``.
-    cloud_ptr : ndarray of shape (n_clouds + 1,), int64
+        All points; cloud ``c`` is ``xyz[offsets[c]:offsets[c + 1]]``.
+    offsets : ndarray of shape (n_clouds + 1,), int64
         Offsets of the clouds.
     n_neighbors, radius, algorithm
         As in :func:`compute_neighborhoods`.
@@ -324,25 +324,25 @@ def search_packed(
         Only with ``return_order``.
     """
     nb, order = _search_packed(
-        xyz, cloud_ptr, n_neighbors, radius, n_threads, algorithm, with_sqdist
+        xyz, offsets, n_neighbors, radius, n_threads, algorithm, with_sqdist
     )
     return (nb, order) if return_order else nb
 
 
 def _search_packed(
-    xyz, cloud_ptr, n_neighbors, radius, n_threads, algorithm, with_sqdist
+    xyz, offsets, n_neighbors, radius, n_threads, algorithm, with_sqdist
 ):
     """:func:`search_packed`, returning ``(neighborhoods, grid order or None)``."""
     _check_search(n_neighbors, radius, algorithm)
-    cloud_ptr = np.asarray(cloud_ptr, dtype=np.int64)
+    offsets = np.asarray(offsets, dtype=np.int64)
     # squared distances overflow beyond ~7.7e153: refused, not searched
-    lo_hi = cloud_bounds(xyz, cloud_ptr)
+    lo_hi = cloud_bounds(xyz, offsets)
     check_extents(
         *lo_hi,
         max_extent(np.float64),
         what="squared distances in float64 (the neighbour search)",
     )
-    sizes = np.diff(cloud_ptr)
+    sizes = np.diff(offsets)
     indptr = np.zeros(len(xyz) + 1, dtype=np.int64)
     if n_neighbors is not None:
         counts = np.repeat(np.minimum(sizes, int(n_neighbors)), sizes)
@@ -354,8 +354,8 @@ def _search_packed(
         return empty, None
     if algorithm == "kd_tree":
         if n_neighbors is not None:
-            return _knn_kd_tree(xyz, cloud_ptr, indptr, None, n_threads), None
-        return _radius_kd_tree(xyz, cloud_ptr, float(radius), n_threads), None
+            return _knn_kd_tree(xyz, offsets, indptr, None, n_threads), None
+        return _radius_kd_tree(xyz, offsets, float(radius), n_threads), None
     n = len(xyz)
     if n_neighbors is not None:
         nb = Neighborhoods(
@@ -365,7 +365,7 @@ def _search_packed(
         )
         hard = np.zeros(n, dtype=np.bool_)
         todo = np.zeros(0, dtype=np.bool_)
-        grid = _knn_grid(xyz, cloud_ptr, int(n_neighbors), lo_hi, n_threads)
+        grid = _knn_grid(xyz, offsets, int(n_neighbors), lo_hi, n_threads)
         order = grid.order
         rows = np.arange(grid.n_cells)
         for attempt in range(_COARSER):
@@ -375,19 +375,19 @@ def _search_packed(
                 return nb, order
             todo, hard = hard, np.zeros(n, dtype=np.bool_)
             which = np.flatnonzero(todo)
-            cloud = np.searchsorted(cloud_ptr, which, side="right") - 1
+            cloud = np.searchsorted(offsets, which, side="right") - 1
             if sizes[cloud].sum() <= _BRUTE_WORK:
-                args = (which, cloud, xyz, cloud_ptr, indptr, nb.indices, nb.sqdist)
+                args = (which, cloud, xyz, offsets, indptr, nb.indices, nb.sqdist)
                 parallel_rows(g.knn_brute, len(which), n_threads, *args)
                 return nb, order
             if attempt == _COARSER - 1:
                 break
             # isolated points: again on cells four times wider
-            grid = build_grid(xyz, cloud_ptr, 4 * grid.h, lo_hi, n_threads)
+            grid = build_grid(xyz, offsets, 4 * grid.h, lo_hi, n_threads)
             rows = g.cells_with(todo, grid)
-        _knn_kd_tree(xyz, cloud_ptr, indptr, np.flatnonzero(todo), n_threads, nb)
+        _knn_kd_tree(xyz, offsets, indptr, np.flatnonzero(todo), n_threads, nb)
         return nb, order
-    grid = build_grid(xyz, cloud_ptr, np.full(len(sizes), radius), lo_hi, n_threads)
+    grid = build_grid(xyz, offsets, np.full(len(sizes), radius), lo_hi, n_threads)
     counts = ball_counts(grid, radius, n_threads)
     np.cumsum(counts, out=indptr[1:])
     nb = Neighborhoods(
@@ -399,21 +399,21 @@ def _search_packed(
     return nb, grid.order
 
 
-def _knn_grid(xyz, cloud_ptr, k, lo_hi=None, n_threads=1):
+def _knn_grid(xyz, offsets, k, lo_hi=None, n_threads=1):
     """Grid for k-nearest searches, cell sizes adapted to each cloud's density.
 
     Returns the :class:`~skpcd.neighbors._grid.VoxelGrid`.
     """
-    sizes = np.diff(cloud_ptr)
+    sizes = np.diff(offsets)
     target = max(1.0, _OCCUPANCY * k)
-    lo, hi = cloud_bounds(xyz, cloud_ptr) if lo_hi is None else lo_hi
+    lo, hi = cloud_bounds(xyz, offsets) if lo_hi is None else lo_hi
     e = np.sort(hi - lo, axis=1)
     # first guess: points spread over the largest face of the bounding box
     area = e[:, 2] * np.maximum(e[:, 1], 1e-3 * e[:, 2])
     h = np.sqrt(area * target / np.maximum(sizes, 1))
     for _ in range(3):
-        origin, h, dims = grid_shape(xyz, cloud_ptr, h, (lo, hi))
-        order, cells = sort_points(xyz, cloud_ptr, origin, h, dims, n_threads)
+        origin, h, dims = grid_shape(xyz, offsets, h, (lo, hi))
+        order, cells = sort_points(xyz, offsets, origin, h, dims, n_threads)
         cloud_cells = cells[3]
         occupancy = sizes / np.maximum(np.diff(cloud_cells), 1)
         off = (occupancy < target / 2) | (occupancy > target * 2)
@@ -433,7 +433,7 @@ def _sqdist(xyz, rows, idx):
     return (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2]
 
 
-def _knn_kd_tree(xyz, cloud_ptr, indptr, which, n_threads, nb=None):
+def _knn_kd_tree(xyz, offsets, indptr, which, n_threads, nb=None):
     """k nearest with cKDTree, for all points or the points ``which``."""
     if nb is None:
         nb = Neighborhoods(
@@ -442,8 +442,8 @@ def _knn_kd_tree(xyz, cloud_ptr, indptr, which, n_threads, nb=None):
             np.empty(indptr[-1], dtype=np.float32),
         )
     workers = n_threads
-    for c in range(len(cloud_ptr) - 1):
-        start, stop = int(cloud_ptr[c]), int(cloud_ptr[c + 1])
+    for c in range(len(offsets) - 1):
+        start, stop = int(offsets[c]), int(offsets[c + 1])
         if which is None:
             q = np.arange(start, stop)
         else:
@@ -467,12 +467,12 @@ def _knn_kd_tree(xyz, cloud_ptr, indptr, which, n_threads, nb=None):
     return nb
 
 
-def _radius_kd_tree(xyz, cloud_ptr, radius, n_threads):
+def _radius_kd_tree(xyz, offsets, radius, n_threads):
     """Radius neighbourhoods with cKDTree."""
     workers = n_threads
     lists = []
-    for c in range(len(cloud_ptr) - 1):
-        start, stop = int(cloud_ptr[c]), int(cloud_ptr[c + 1])
+    for c in range(len(offsets) - 1):
+        start, stop = int(offsets[c]), int(offsets[c + 1])
         if stop > start:
             part = xyz[start:stop]
             found = cKDTree(part).query_ball_point(

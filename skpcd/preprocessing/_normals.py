@@ -42,7 +42,7 @@ def check_viewpoint(viewpoint):
     return vp
 
 
-def local_viewpoints(viewpoint, xyz, cloud_ptr, origins):
+def local_viewpoints(viewpoint, xyz, offsets, origins):
     """The viewpoint of every cloud in its local frame.
 
     ``"corner"`` is a point fixed to each cloud: its lower corner moved out
@@ -62,7 +62,7 @@ def local_viewpoints(viewpoint, xyz, cloud_ptr, origins):
         As checked by ``check_viewpoint``.
     xyz : ndarray of shape (n_points, 3), float64
         The packed clouds, in their own coordinates.
-    cloud_ptr : ndarray of shape (n_clouds + 1,), int64
+    offsets : ndarray of shape (n_clouds + 1,), int64
         Offsets of the clouds.
     origins : ndarray of shape (n_clouds, 3), float64
         The origins of the clouds' local frames
@@ -74,7 +74,7 @@ def local_viewpoints(viewpoint, xyz, cloud_ptr, origins):
         Cloud ``c``'s viewpoint in its local frame.
     """
     if isinstance(viewpoint, str):
-        lo, hi = cloud_bounds(xyz, cloud_ptr)
+        lo, hi = cloud_bounds(xyz, offsets)
         return (lo - origins) - (hi - lo) - 1.0
     return viewpoint - origins
 
@@ -182,20 +182,20 @@ def _normals_packed(xyz, offsets, neighborhoods, viewpoint, n_threads):
     return normals.astype(np.float64), curvature.astype(np.float64)
 
 
-def normals_f32(points, neighborhoods, viewpoint, n_threads, cloud_ptr=None):
+def normals_f32(points, neighborhoods, viewpoint, n_threads, offsets=None):
     """Normals and curvature, float32, of float32 packed points.
 
     ``points`` are in their clouds' local frames
     (:func:`~skpcd.utils._geometry.local_frame`); ``viewpoint`` is one
     point (3,) for all, or one per cloud ``(n_clouds, 3)`` in the same
-    frames, the clouds given by ``cloud_ptr`` (default: one cloud).
+    frames, the clouds given by ``offsets`` (default: one cloud).
     """
     n = len(points)
-    if cloud_ptr is None:
-        cloud_ptr = np.array([0, n], dtype=np.int64)
-    cloud_ptr = np.asarray(cloud_ptr, dtype=np.int64)
+    if offsets is None:
+        offsets = np.array([0, n], dtype=np.int64)
+    offsets = np.asarray(offsets, dtype=np.int64)
     viewpoints = np.broadcast_to(
-        np.asarray(viewpoint, dtype=np.float32), (len(cloud_ptr) - 1, 3)
+        np.asarray(viewpoint, dtype=np.float32), (len(offsets) - 1, 3)
     )
     normals = np.empty((n, 3), dtype=np.float32)
     curvature = np.empty(n, dtype=np.float32)
@@ -207,7 +207,7 @@ def normals_f32(points, neighborhoods, viewpoint, n_threads, cloud_ptr=None):
         neighborhoods.indptr,
         neighborhoods.indices,
         np.ascontiguousarray(viewpoints),
-        cloud_ptr,
+        offsets,
         normals,
         curvature,
     )

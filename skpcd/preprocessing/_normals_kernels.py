@@ -109,22 +109,22 @@ def eigen33_smallest(c00, c01, c02, c11, c12, c22):
 
 @njit(cache=True, nogil=True)
 def normals_rows(
-    lo, hi, points, indptr, indices, viewpoints, cloud_ptr, normals, curvature
+    lo, hi, points, indptr, indices, viewpoints, offsets, normals, curvature
 ):
     """Normals and curvature of points ``lo`` to ``hi`` from their neighbourhoods.
 
     ``points`` (in their clouds' local frames) and ``viewpoints`` (one row
-    per cloud, in the same frames; cloud ``c`` is ``cloud_ptr[c]`` to
-    ``cloud_ptr[c + 1]``) are float32; rows of ``normals`` (n, 3) and
+    per cloud, in the same frames; cloud ``c`` is ``offsets[c]`` to
+    ``offsets[c + 1]``) are float32; rows of ``normals`` (n, 3) and
     ``curvature`` (n,) are filled in place. Fewer than three neighbours give
     NaN normal and curvature (PCL's rule).
     """
     points, indptr, indices = borrow(points), borrow(indptr), borrow(indices)
-    viewpoints, cloud_ptr = borrow(viewpoints), borrow(cloud_ptr)
+    viewpoints, offsets = borrow(viewpoints), borrow(offsets)
     normals, curvature = borrow(normals), borrow(curvature)
-    c = np.searchsorted(cloud_ptr, lo, side="right") - 1
+    c = np.searchsorted(offsets, lo, side="right") - 1
     for i in range(lo, hi):
-        while i >= cloud_ptr[c + 1]:
+        while i >= offsets[c + 1]:
             c += 1
         vx, vy, vz = viewpoints[c, 0], viewpoints[c, 1], viewpoints[c, 2]
         _normal_row(points, indptr, indices, vx, vy, vz, normals, curvature, i, i)

@@ -30,22 +30,22 @@ def point_bounds(xyz):
     )[0]
 
 
-def cloud_bounds(xyz, cloud_ptr):
+def cloud_bounds(xyz, offsets):
     """Per-cloud minimum and maximum of packed points, ``(n_clouds, 3)`` each
     (zeros for an empty cloud)."""
-    n_clouds = len(cloud_ptr) - 1
+    n_clouds = len(offsets) - 1
     lo = np.zeros((n_clouds, 3))
     hi = np.zeros((n_clouds, 3))
-    full = np.flatnonzero(np.diff(cloud_ptr) > 0)
+    full = np.flatnonzero(np.diff(offsets) > 0)
     if len(full):
-        starts = np.asarray(cloud_ptr)[full]
+        starts = np.asarray(offsets)[full]
         lo[full] = np.minimum.reduceat(xyz, starts, axis=0)
         hi[full] = np.maximum.reduceat(xyz, starts, axis=0)
     return lo, hi
 
 
 def local_frame(
-    xyz, cloud_ptr, *, dtype=np.float32, keep_within=LOCAL_LIMIT, input_name="X"
+    xyz, offsets, *, dtype=np.float32, keep_within=LOCAL_LIMIT, input_name="X"
 ):
     """Packed clouds in their local frames: the one place coordinates are
     moved before a descriptor computes on them.
@@ -66,8 +66,8 @@ def local_frame(
     Parameters
     ----------
     xyz : ndarray of shape (n_points, 3), float64
-        All points, finite; cloud ``c`` is ``xyz[cloud_ptr[c]:cloud_ptr[c + 1]]``.
-    cloud_ptr : ndarray of shape (n_clouds + 1,), int64
+        All points, finite; cloud ``c`` is ``xyz[offsets[c]:offsets[c + 1]]``.
+    offsets : ndarray of shape (n_clouds + 1,), int64
         Offsets of the clouds.
     dtype : dtype, default=np.float32
         The precision of the local coordinates.
@@ -93,14 +93,14 @@ def local_frame(
         ``dtype`` (:func:`max_extent`).
     """
     xyz = np.asarray(xyz, dtype=np.float64)
-    lo, hi = cloud_bounds(xyz, cloud_ptr)
+    lo, hi = cloud_bounds(xyz, offsets)
     what = f"squared distances in {np.dtype(dtype).name}"
     check_extents(lo, hi, max_extent(dtype), input_name=input_name, what=what)
     near = (lo > -keep_within) & (hi < keep_within)
     origins = np.where(near, 0.0, lo)
     local = xyz.astype(dtype, order="C")  # a copy, also in float64
     for c in np.flatnonzero(~near.all(axis=1)):
-        a, b = cloud_ptr[c], cloud_ptr[c + 1]
+        a, b = offsets[c], offsets[c + 1]
         # computed in float64, rounded once to dtype
         np.subtract(xyz[a:b], origins[c], out=local[a:b], casting="same_kind")
     return local, origins

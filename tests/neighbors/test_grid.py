@@ -25,8 +25,8 @@ def test_argsort_keys_leaves_its_input_alone():
 def test_the_grid_is_the_same_for_every_thread_count():
     rng = np.random.default_rng(1)
     xyz = np.round(rng.uniform(0, 40, (150_000, 3)), 2)
-    cloud_ptr = np.array([0, 60_000, 60_001, 150_000], dtype=np.int64)
-    grids = [build_grid(xyz, cloud_ptr, np.full(3, 0.7), n_threads=t) for t in (1, 2)]
+    offsets = np.array([0, 60_000, 60_001, 150_000], dtype=np.int64)
+    grids = [build_grid(xyz, offsets, np.full(3, 0.7), n_threads=t) for t in (1, 2)]
     for a, b in zip(*grids, strict=True):
         np.testing.assert_array_equal(a, b)
     # the points of every cell are contiguous, in index order within a cell
