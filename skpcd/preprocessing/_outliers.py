@@ -12,29 +12,17 @@ import typing
 from numbers import Integral, Real
 
 import numpy as np
-from sklearn.base import BaseEstimator, OutlierMixin, _fit_context
+from sklearn.base import OutlierMixin
 from sklearn.utils._param_validation import Interval
-from sklearn.utils.validation import validate_data
 
 from skpcd.neighbors._neighbors import compute_neighborhoods
 from skpcd.utils._compile import entry_point
-from skpcd.utils._validation import refuse_sequence
+from skpcd.utils._estimator import SceneEstimator
 
 __all__ = ["RadiusOutlierFilter", "StatisticalOutlierFilter"]
 
 
-def _xyz(estimator, X):
-    refuse_sequence(X)
-    X = validate_data(estimator, X, dtype=np.float64)
-    if X.shape[1] < 3:
-        raise ValueError(
-            f"X has {X.shape[1]} feature(s); {type(estimator).__name__} needs at "
-            "least 3 columns (x, y, z); columns beyond the third are ignored."
-        )
-    return np.ascontiguousarray(X[:, :3])
-
-
-class _OutlierFilter(OutlierMixin, BaseEstimator):
+class _OutlierFilter(OutlierMixin, SceneEstimator):
     """fit_predict as scikit-learn's outlier detectors: +1 inlier, -1 outlier."""
 
     @entry_point
@@ -134,30 +122,13 @@ class StatisticalOutlierFilter(_OutlierFilter):
         self.std_ratio = std_ratio
         self.n_jobs = n_jobs
 
-    @_fit_context(prefer_skip_nested_validation=True)
-    @entry_point
-    def fit(self, X, y=None):
-        """Flag the outliers of a cloud.
-
-        Parameters
-        ----------
-        X : array-like of shape (n_points, 3+)
-            The cloud; columns beyond the third are ignored.
-        y : None
-            Ignored.
-
-        Returns
-        -------
-        self : object
-            The fitted filter.
-        """
-        xyz = _xyz(self, X)
+    def _fit(self, xyz):
         n = len(xyz)
         if n == 1:
             self.mean_distances_ = np.zeros(1)
             self.threshold_ = 0.0
             self.inlier_mask_ = np.ones(1, dtype=bool)
-            return self
+            return
         k = min(int(self.n_neighbors), n - 1) + 1
         nb = compute_neighborhoods(xyz, n_neighbors=k, n_jobs=self.n_jobs)
         dist = np.sqrt(nb.sqdist.reshape(n, k).astype(np.float64))
@@ -166,7 +137,6 @@ class StatisticalOutlierFilter(_OutlierFilter):
         std = self.mean_distances_.std(ddof=1) if n > 1 else 0.0
         self.threshold_ = float(self.mean_distances_.mean() + self.std_ratio * std)
         self.inlier_mask_ = self.mean_distances_ <= self.threshold_
-        return self
 
 
 class RadiusOutlierFilter(_OutlierFilter):
@@ -234,26 +204,8 @@ class RadiusOutlierFilter(_OutlierFilter):
         self.min_neighbors = min_neighbors
         self.n_jobs = n_jobs
 
-    @_fit_context(prefer_skip_nested_validation=True)
-    @entry_point
-    def fit(self, X, y=None):
-        """Flag the outliers of a cloud.
-
-        Parameters
-        ----------
-        X : array-like of shape (n_points, 3+)
-            The cloud; columns beyond the third are ignored.
-        y : None
-            Ignored.
-
-        Returns
-        -------
-        self : object
-            The fitted filter.
-        """
-        xyz = _xyz(self, X)
+    def _fit(self, xyz):
         nb = compute_neighborhoods(xyz, radius=float(self.radius), n_jobs=self.n_jobs)
         # the point itself is among its neighbours
         self.n_neighbors_ = nb.sizes.astype(np.int64) - 1
         self.inlier_mask_ = self.n_neighbors_ >= self.min_neighbors
-        return self

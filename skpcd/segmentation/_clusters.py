@@ -18,16 +18,14 @@ from concurrent.futures import ThreadPoolExecutor
 from numbers import Integral, Real
 
 import numpy as np
-from sklearn.base import BaseEstimator, ClusterMixin, _fit_context
-from sklearn.utils import check_array
+from sklearn.base import ClusterMixin
 from sklearn.utils._param_validation import Interval
-from sklearn.utils.validation import validate_data
 
 from skpcd.neighbors._grid import ball_counts, radius_grid
 from skpcd.segmentation import _cluster_kernels as k
 from skpcd.utils._compile import entry_point
+from skpcd.utils._estimator import SceneEstimator
 from skpcd.utils._parallel import effective_threads, parallel_rows, parallel_section
-from skpcd.utils._validation import refuse_sequence
 
 __all__ = [
     "EUCLIDEAN_EPS",
@@ -41,31 +39,6 @@ __all__ = [
 EUCLIDEAN_EPS = 0.2
 # Fewer points than this per thread: the union-find runs in one thread.
 _MIN_UNION_POINTS = 50_000
-
-
-def check_scene(X, estimator=None, *, min_points=1, reset=True):
-    """One cloud as X: ``(n_points, 3+)`` to contiguous float64 xyz.
-
-    Columns beyond the third (intensity...) are ignored; fewer than three
-    is an error (a scene has x, y and z). With an estimator, sklearn's
-    :func:`~sklearn.utils.validation.validate_data` checks X and records
-    ``n_features_in_``.
-    """
-    kwargs = {"dtype": np.float64, "ensure_min_samples": min_points}
-    refuse_sequence(X)
-    if estimator is None:
-        X = check_array(X, input_name="X", **kwargs)
-    else:
-        X = validate_data(estimator, X, reset=reset, **kwargs)
-    if X.shape[1] < 3:
-        name = "the scene" if estimator is None else type(estimator).__name__
-        raise ValueError(
-            f"X has {X.shape[1]} feature(s); {name} needs at least 3 columns "
-            "(x, y, z); columns beyond the third are ignored."
-        )
-    if X.shape[1] == 3:
-        return np.ascontiguousarray(X)  # no copy when it already is
-    return np.ascontiguousarray(X[:, :3])
 
 
 def _union(grid, core, r2, n_threads):
@@ -240,7 +213,7 @@ def euclidean_clusters(
     return est.fit(points).labels_
 
 
-class EuclideanClusters(ClusterMixin, BaseEstimator):
+class EuclideanClusters(ClusterMixin, SceneEstimator):
     """Euclidean cluster extraction: connected components within a distance.
 
     Two points belong to the same cluster when a chain of points links them
@@ -328,27 +301,9 @@ class EuclideanClusters(ClusterMixin, BaseEstimator):
         self.max_cluster_size = max_cluster_size
         self.n_jobs = n_jobs
 
-    @_fit_context(prefer_skip_nested_validation=True)
-    @entry_point
-    def fit(self, X, y=None):
-        """Find the clusters of one cloud.
-
-        Parameters
-        ----------
-        X : array-like of shape (n_points, 3+)
-            The points; columns beyond the third are ignored.
-        y : None
-            Ignored.
-
-        Returns
-        -------
-        self : object
-            The fitted estimator.
-        """
-        xyz = check_scene(X, self)
+    def _fit(self, xyz):
         labels, _ = grid_dbscan(xyz, self.eps, 1, n_jobs=self.n_jobs)
         self.labels_ = filter_cluster_sizes(
             labels, self.min_cluster_size, self.max_cluster_size
         )
         self.n_clusters_ = int(self.labels_.max() + 1) if len(labels) else 0
-        return self

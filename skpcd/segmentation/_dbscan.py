@@ -16,13 +16,15 @@ from numbers import Integral, Real
 
 import numpy as np
 from scipy.spatial import cKDTree
-from sklearn.base import BaseEstimator, ClusterMixin, _fit_context
+from sklearn.base import ClusterMixin
 from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval
 
-from skpcd.segmentation._clusters import check_scene, grid_dbscan
+from skpcd.segmentation._clusters import grid_dbscan
 from skpcd.utils._compile import entry_point
+from skpcd.utils._estimator import SceneEstimator
 from skpcd.utils._parallel import effective_threads
+from skpcd.utils._validation import check_scene
 
 __all__ = ["AutoEpsDBSCAN", "eps_from_knee", "estimate_eps", "fit_knee"]
 
@@ -152,7 +154,7 @@ def estimate_eps(
     return est._estimate(xyz)
 
 
-class AutoEpsDBSCAN(ClusterMixin, BaseEstimator):
+class AutoEpsDBSCAN(ClusterMixin, SceneEstimator):
     """DBSCAN whose radius is estimated from the data (Wang et al., 2019).
 
     The radius comes from the curve of the mean distance of the points to
@@ -351,24 +353,10 @@ class AutoEpsDBSCAN(ClusterMixin, BaseEstimator):
         self.knee_distance_ = knee_distance
         return eps_from_knee(knee_distance, self.eps_scale)
 
-    @_fit_context(prefer_skip_nested_validation=True)
-    @entry_point
-    def fit(self, X, y=None):
-        """Estimate eps (unless given) and cluster one cloud.
+    def _min_points(self):
+        return 1 if self.eps is not None else 2
 
-        Parameters
-        ----------
-        X : array-like of shape (n_points, 3+)
-            The points; columns beyond the third are ignored.
-        y : None
-            Ignored.
-
-        Returns
-        -------
-        self : object
-            The fitted estimator.
-        """
-        xyz = check_scene(X, self, min_points=1 if self.eps is not None else 2)
+    def _fit(self, xyz):
         if self.eps is None:
             self.eps_ = self._estimate(xyz)
         else:
@@ -381,4 +369,3 @@ class AutoEpsDBSCAN(ClusterMixin, BaseEstimator):
         )
         self.core_sample_indices_ = np.flatnonzero(core)
         self.n_clusters_ = int(self.labels_.max() + 1) if len(xyz) else 0
-        return self

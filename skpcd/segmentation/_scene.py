@@ -24,7 +24,6 @@ from skpcd.preprocessing import (
 from skpcd.segmentation._clusters import (
     EUCLIDEAN_EPS,
     EuclideanClusters,
-    check_scene,
     filter_cluster_sizes,
 )
 from skpcd.segmentation._dbscan import EPS_SCALE, AutoEpsDBSCAN, estimate_eps
@@ -33,6 +32,7 @@ from skpcd.segmentation._structures import KINDS, STRUCTURE_DEFAULTS, segment_st
 from skpcd.segmentation.ground import GROUND_PRESETS, GroundFilter
 from skpcd.segmentation.tiling._segment import segment_tiled
 from skpcd.utils._compile import entry_point
+from skpcd.utils._validation import check_scene
 
 __all__ = ["SceneSegmentation", "segment_scene"]
 

@@ -1,4 +1,6 @@
-"""The base class of the transformers that take a list of clouds and learn nothing.
+"""The base classes of skpcd's estimators: the transformers that take a list
+of clouds and learn nothing (:class:`CloudTransformer`), and the estimators
+fitted on one cloud, a scene (:class:`SceneEstimator`).
 
 :class:`CloudTransformer` holds what every such transformer does the same
 way: ``fit`` validates and records ``n_features_in_``, ``transform`` is a
@@ -24,9 +26,9 @@ from sklearn.base import BaseEstimator, TransformerMixin, _fit_context
 
 from skpcd.utils._compile import entry_point
 from skpcd.utils._parallel import map_batches
-from skpcd.utils._validation import check_point_clouds
+from skpcd.utils._validation import check_point_clouds, check_scene
 
-__all__ = ["CloudTransformer"]
+__all__ = ["CloudTransformer", "SceneEstimator"]
 
 
 class CloudTransformer(TransformerMixin, BaseEstimator):
@@ -129,3 +131,37 @@ class CloudTransformer(TransformerMixin, BaseEstimator):
         tags.input_tags.two_d_array = False
         tags.requires_fit = False
         return tags
+
+
+class SceneEstimator(BaseEstimator):
+    """An estimator fitted on one cloud, a scene (a clusterer, a filter).
+
+    :meth:`fit` validates the parameters and the cloud (an ``(n_points,
+    3+)`` array, its xyz as contiguous float64 through
+    :func:`~skpcd.utils._validation.check_scene`, ``n_features_in_``
+    recorded) and hands the xyz to the subclass's ``_fit(xyz)``.
+    ``_min_points(self)`` gives the fewest points it takes (1).
+    """
+
+    def _min_points(self):
+        return 1
+
+    @_fit_context(prefer_skip_nested_validation=True)
+    @entry_point
+    def fit(self, X, y=None):
+        """Fit on one cloud.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_points, 3+)
+            The cloud; columns beyond the third are ignored.
+        y : None
+            Ignored.
+
+        Returns
+        -------
+        self : object
+            The fitted estimator.
+        """
+        self._fit(check_scene(X, self, min_points=self._min_points()))
+        return self

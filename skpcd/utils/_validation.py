@@ -4,6 +4,7 @@ import numbers
 
 import numpy as np
 from sklearn.utils import check_array
+from sklearn.utils.validation import validate_data
 
 __all__ = ["check_point_clouds"]
 
@@ -334,3 +335,28 @@ def refuse_sequence(X):
             "X must be one point cloud, an array of shape (n_points, 3+); got a "
             "sequence of clouds: segment each cloud on its own."
         )
+
+
+def check_scene(X, estimator=None, *, min_points=1, reset=True):
+    """One cloud as X: ``(n_points, 3+)`` to contiguous float64 xyz.
+
+    Columns beyond the third (intensity...) are ignored; fewer than three
+    is an error (a scene has x, y and z). With an estimator, sklearn's
+    :func:`~sklearn.utils.validation.validate_data` checks X and records
+    ``n_features_in_``.
+    """
+    kwargs = {"dtype": np.float64, "ensure_min_samples": min_points}
+    refuse_sequence(X)
+    if estimator is None:
+        X = check_array(X, input_name="X", **kwargs)
+    else:
+        X = validate_data(estimator, X, reset=reset, **kwargs)
+    if X.shape[1] < 3:
+        name = "the scene" if estimator is None else type(estimator).__name__
+        raise ValueError(
+            f"X has {X.shape[1]} feature(s); {name} needs at least 3 columns "
+            "(x, y, z); columns beyond the third are ignored."
+        )
+    if X.shape[1] == 3:
+        return np.ascontiguousarray(X)  # no copy when it already is
+    return np.ascontiguousarray(X[:, :3])

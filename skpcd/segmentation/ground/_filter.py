@@ -6,21 +6,21 @@ import typing
 from numbers import Integral, Real
 
 import numpy as np
-from sklearn.base import BaseEstimator, _fit_context
 from sklearn.utils._param_validation import Interval, StrOptions
-from sklearn.utils.validation import check_is_fitted, validate_data
+from sklearn.utils.validation import check_is_fitted
 
 from skpcd.segmentation.ground._bases import without_bases
 from skpcd.segmentation.ground._csf import csf_ground, csf_terrain
 from skpcd.segmentation.ground._smrf import smrf_fit, smrf_ground
 from skpcd.utils._compile import entry_point
+from skpcd.utils._estimator import SceneEstimator
 from skpcd.utils._parallel import effective_threads
-from skpcd.utils._validation import refuse_sequence
+from skpcd.utils._validation import check_scene
 
 __all__ = ["GroundFilter", "fit_window"]
 
 
-class GroundFilter(BaseEstimator):
+class GroundFilter(SceneEstimator):
     """Ground points of a LiDAR scene: morphological (SMRF) or cloth (CSF) filter.
 
     :meth:`fit` builds a terrain model (DEM) of the scene; :meth:`predict`
@@ -235,35 +235,7 @@ class GroundFilter(BaseEstimator):
         self.keep_bases = keep_bases
         self.n_jobs = n_jobs
 
-    def _xyz(self, X, reset):
-
-        refuse_sequence(X)
-        X = validate_data(self, X, dtype=np.float64, reset=reset)
-        if X.shape[1] < 3:
-            raise ValueError(
-                f"X has {X.shape[1]} feature(s); GroundFilter needs at least 3 "
-                "columns (x, y, z)."
-            )
-        return np.ascontiguousarray(X[:, :3])
-
-    @_fit_context(prefer_skip_nested_validation=True)
-    @entry_point
-    def fit(self, X, y=None):
-        """Build the terrain model of a scene.
-
-        Parameters
-        ----------
-        X : array-like of shape (n_points, 3+)
-            The scene; columns beyond the third are ignored.
-        y : None
-            Ignored.
-
-        Returns
-        -------
-        self : object
-            The fitted filter.
-        """
-        xyz = self._xyz(X, reset=True)
+    def _fit(self, xyz):
         n_threads = effective_threads(self.n_jobs)
         if self.method == "csf":
             ground = csf_ground(
@@ -283,7 +255,6 @@ class GroundFilter(BaseEstimator):
             if self.keep_bases:
                 ground = without_bases(xyz, ground, n_threads)
         self._set_terrain(terrain, ground)
-        return self
 
     def _set_terrain(self, terrain, ground):
         self._terrain = terrain
@@ -318,7 +289,7 @@ class GroundFilter(BaseEstimator):
             ``z`` minus the DEM interpolated bilinearly at ``(x, y)``.
         """
         check_is_fitted(self)
-        xyz = self._xyz(X, reset=False)
+        xyz = check_scene(X, self, reset=False)
         n_threads = effective_threads(self.n_jobs)
         return xyz[:, 2] - self._terrain.sample(xyz, False, n_threads)
 
@@ -337,7 +308,7 @@ class GroundFilter(BaseEstimator):
             True for ground points.
         """
         check_is_fitted(self)
-        xyz = self._xyz(X, reset=False)
+        xyz = check_scene(X, self, reset=False)
         n_threads = effective_threads(self.n_jobs)
         if self.method == "smrf":
             return smrf_ground(self._terrain, xyz, self, n_threads)

@@ -16,6 +16,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from skpcd.io._common import check_chunk_size
 from skpcd.segmentation._clusters import EUCLIDEAN_EPS, grid_dbscan
 from skpcd.segmentation._dbscan import (
     AutoEpsDBSCAN,
@@ -28,7 +29,6 @@ from skpcd.segmentation.ground._smrf import reach_cells
 from skpcd.segmentation.tiling._dispatch import map_tiles
 from skpcd.segmentation.tiling._geometry import held_square, reaches
 from skpcd.segmentation.tiling._spill import (
-    check_chunk_size,
     detach,
     result_array,
     tile_scene,

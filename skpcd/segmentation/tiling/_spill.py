@@ -12,20 +12,19 @@ not by the scan. The per-tile results go to memory-mapped arrays
 import os
 import shutil
 import tempfile
-from numbers import Integral
 from pathlib import Path
 
 import numpy as np
 
 from skpcd.io._api import read_point_cloud
 from skpcd.io._chunks import file_bounds, is_path, is_streamed, iter_file_chunks
-from skpcd.segmentation._clusters import check_scene
+from skpcd.io._common import check_chunk_size
 from skpcd.segmentation.tiling._geometry import TileGrid
 from skpcd.utils._geometry import point_bounds
+from skpcd.utils._validation import check_scene
 
 __all__ = [
     "TiledScene",
-    "check_chunk_size",
     "detach",
     "iter_chunks",
     "load_tile",
@@ -147,16 +146,6 @@ def load_tile(path):
         return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
     records = np.fromfile(path, dtype=_RECORD)
     return np.ascontiguousarray(records["xyz"]), records["index"].copy()
-
-
-def check_chunk_size(chunk_size):
-    if (
-        isinstance(chunk_size, bool)
-        or not isinstance(chunk_size, Integral)
-        or chunk_size < 1
-    ):
-        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
-    return int(chunk_size)
 
 
 def tile_scene(
