@@ -25,10 +25,16 @@ import json
 import os
 import platform
 import struct
+import zipfile
 from pathlib import Path
 
+import joblib
 import numpy as np
+import sklearn
+from sklearn.base import BaseEstimator
+from sklearn.tree._tree import Tree
 
+from skpcd import __version__
 from skpcd.exceptions import (
     IncompatibleModelError,
     MissingFileError,
@@ -104,15 +110,11 @@ _PICKLE_STARTS = (
 
 
 def _versions():
-    import numpy
-    import sklearn
-
-    from skpcd import __version__
 
     return {
         "skpcd": __version__,
         "scikit-learn": sklearn.__version__,
-        "numpy": numpy.__version__,
+        "numpy": np.__version__,
         "python": platform.python_version(),
     }
 
@@ -146,12 +148,9 @@ def _pack(header, payload):
 
 def _serialise(model, format):
     if format == "joblib":
-        import joblib
-
         buffer = io.BytesIO()
         joblib.dump(model, buffer)
         return buffer.getvalue(), "joblib"
-    import zipfile
 
     import skops
     import skops.io
@@ -411,7 +410,6 @@ def _from_skops(path, payload, trusted):
 
 
 def _from_joblib(path, source):
-    import joblib
 
     try:
         return joblib.load(source)
@@ -474,8 +472,6 @@ def _check_trees(path, model):
     hands its trees its own input unchecked, so they must expect as many
     features as it does.
     """
-    from sklearn.base import BaseEstimator
-    from sklearn.tree._tree import Tree
 
     seen = set()
     stack = [(model, None)]
