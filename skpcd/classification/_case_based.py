@@ -14,6 +14,7 @@ from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_array, check_is_fitted, validate_data
 from threadpoolctl import threadpool_limits
 
+from skpcd.classification._unknown import best_or_unknown, unknown_label_for
 from skpcd.utils._parallel import effective_threads, map_batches, task_threads
 
 __all__ = ["CaseBasedClassifier", "case_similarity", "make_case_based_pipeline"]
@@ -392,14 +393,6 @@ class CaseBasedClassifier(ClassifierMixin, BaseEstimator):
             return X, y
         return validate_data(self, X, reset=False, **kw)
 
-    def _unknown(self):
-        if self.unknown_label is not None:
-            return self.unknown_label
-        if self.classes_.dtype.kind in "OUS":
-            return "unknown"
-        low = self.classes_.min().item() - 1  # a Python number: no uint wrap
-        return -1 if low >= -1 else low
-
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, X, y):
         """Store the cases (and index them for the approximate search).
@@ -419,12 +412,9 @@ class CaseBasedClassifier(ClassifierMixin, BaseEstimator):
         X, y = self._check_X(X, reset=True, y=y)
         check_classification_targets(y)
         self.classes_, self._y = np.unique(y, return_inverse=True)
-        self.unknown_label_ = self._unknown()
-        if self.threshold is not None and self.unknown_label_ in self.classes_.tolist():
-            raise ValueError(
-                f"unknown_label={self.unknown_label_!r} is a training class; "
-                "pass another unknown_label"
-            )
+        self.unknown_label_ = unknown_label_for(
+            self.classes_, self.unknown_label, answered=self.threshold is not None
+        )
         volume, H = _split(X, self.volume_column)
         self._volume, self._H = volume, H
         peaks, *stats = _stats(H)
@@ -615,16 +605,7 @@ class CaseBasedClassifier(ClassifierMixin, BaseEstimator):
             when one is a string and the other a number).
         """
         s = self.class_similarity(X)
-        pred = self.classes_[np.argmax(s, axis=1)]
-        if self.threshold is None:
-            return pred
-        kinds = pred.dtype.kind + np.asarray(self.unknown_label_).dtype.kind
-        if set(kinds) <= set("biuf") or set(kinds) <= set("U"):
-            pred = pred.astype(np.result_type(pred, np.asarray(self.unknown_label_)))
-        else:  # e.g. integer classes and a string unknown_label
-            pred = pred.astype(object)
-        pred[s.max(axis=1) < self.threshold] = self.unknown_label_
-        return pred
+        return best_or_unknown(s, self.classes_, self.threshold, self.unknown_label_)
 
     def retrieve(self, X, n_cases=5):
         """The most similar cases of each segment, most similar first.

@@ -3,7 +3,6 @@
 import numbers
 import typing
 
-import numpy as np
 from sklearn.base import (
     BaseEstimator,
     ClassifierMixin,
@@ -14,28 +13,10 @@ from sklearn.base import (
 from sklearn.utils import get_tags
 from sklearn.utils._param_validation import HasMethods, Interval
 
+from skpcd.classification._unknown import best_or_unknown, unknown_label_for
 from skpcd.classification._wrapped import _WrappedClassifierMixin
 
 __all__ = ["RejectUnknown"]
-
-
-def _unknown_label(classes, unknown_label):
-    """``unknown_label``, or the default of
-    :class:`~skpcd.classification.CaseBasedClassifier` for these classes."""
-    if unknown_label is not None:
-        return unknown_label
-    if classes.dtype.kind in "OUS":
-        return "unknown"
-    low = classes.min().item() - 1  # a Python number: no unsigned wrap
-    return -1 if low >= -1 else low
-
-
-def _with_unknown(pred, unknown):
-    """``pred`` in a dtype that holds ``unknown`` too."""
-    kinds = pred.dtype.kind + np.asarray(unknown).dtype.kind
-    if set(kinds) <= set("biuf") or set(kinds) <= set("U"):
-        return pred.astype(np.result_type(pred, np.asarray(unknown)))
-    return pred.astype(object)  # e.g. integer classes and a string label
 
 
 class RejectUnknown(
@@ -137,12 +118,7 @@ class RejectUnknown(
             The fitted estimator.
         """
         self._adopt(clone(self.estimator).fit(X, y, **fit_params))
-        self.unknown_label_ = _unknown_label(self.classes_, self.unknown_label)
-        if self.unknown_label_ in self.classes_.tolist():
-            raise ValueError(
-                f"unknown_label={self.unknown_label_!r} is a training class; "
-                "pass another unknown_label"
-            )
+        self.unknown_label_ = unknown_label_for(self.classes_, self.unknown_label)
         return self
 
     def predict(self, X):
@@ -159,13 +135,9 @@ class RejectUnknown(
             A class of ``classes_``, or ``unknown_label_``. Its dtype holds
             both (object when one is a string and the other a number).
         """
-        proba = self.predict_proba(X)
-        pred = self.classes_[np.argmax(proba, axis=1)]
-        if self.threshold is None:
-            return pred
-        pred = _with_unknown(pred, self.unknown_label_)
-        pred[proba.max(axis=1) < self.threshold] = self.unknown_label_
-        return pred
+        return best_or_unknown(
+            self.predict_proba(X), self.classes_, self.threshold, self.unknown_label_
+        )
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
