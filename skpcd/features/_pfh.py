@@ -835,42 +835,21 @@ class FPFHTransformer(_LocalDescriptor):
     n_bins : int, default=11
         Bins per feature (3 * n_bins values).
     normals : {"auto", "columns", "estimate"}, default="auto"
-        Where the normals come from. ``"auto"``: a cloud with 6 or more
-        columns carries its normals in columns 3-5 (the layout of
-        :class:`~skpcd.preprocessing.NormalEstimator`, and of PCL's
-        ``PointNormal``), used as given, as PCL's ``setInputNormals`` uses
-        them; a cloud with 3 to 5 columns gets estimated normals (PCA,
-        PCL's rules, see :func:`~skpcd.preprocessing.estimate_normals`).
-        ``"columns"``: every cloud carries them (fewer than 6 columns is an
-        error). ``"estimate"``: always estimated, columns 3-5 ignored.
-        Given normals are not renormalised: a norm more than 1e-3 away from
-        1 is a ValueError naming the cloud. A row with a NaN is an undefined
-        normal, as PCL's ``NormalEstimation`` writes it (see
-        ``undefined``).
+        Where the normals come from: given in columns 3-5, estimated, or
+        given where a cloud has them (the default), as in
+        :class:`PFHTransformer`.
     normal_n_neighbors : int, default=None
         k for the estimated normals; by default the descriptor's own
-        neighbourhoods are reused (one search for both). Setting it for a
-        cloud whose normals are given is an error (it would be ignored).
+        neighbourhoods (see :class:`PFHTransformer`).
     normal_radius : float, default=None
-        Radius for the estimated normals instead; likewise refused with
-        given normals.
+        Radius for the estimated normals instead.
     viewpoint : "corner" or tuple of 3 float, default="corner"
-        Estimated normals face this point (PCL ``setViewPoint``).
-        ``"corner"``: a point fixed to each cloud, below and beside it
-        (``min - (max - min) - 1`` per axis), so the descriptors do not
-        depend on where the cloud lies. Three numbers: a point in the
-        clouds' coordinates, the same for all (the sensor's position);
-        ``(0, 0, 0)``, PCL's default, gives PCL's histograms bin for bin
-        (see "Coordinates far from the origin" in the user guide). Given
-        normals keep their sign: a viewpoint with given normals is an
-        error.
+        The point estimated normals face: a corner fixed to each cloud, or
+        three coordinates (``(0, 0, 0)`` gives PCL's histograms bin for
+        bin), as in :class:`PFHTransformer`.
     undefined : {"nan", "zero", "drop", "keep"}, default="nan"
-        Points whose descriptor is undefined (their normal is undefined,
-        estimated or given as NaN, or they have no neighbour): a NaN row, a
-        zero row, no row, or the value PCL computes for them anyway
-        ("keep", which bins NaN features in bin 0). As a neighbour, a point
-        with a NaN normal is binned as PCL bins it (bin 0) whatever the
-        policy. :meth:`undefined_mask` says which points they are.
+        What becomes of the points whose descriptor is undefined, as in
+        :class:`PFHTransformer`; :meth:`undefined_mask` says which they are.
     pooling : {"mean", "sum", "max"}, default=None
         Return one row per cloud, pooled over its defined rows, instead of a
         list of per-point arrays.
