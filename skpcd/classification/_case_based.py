@@ -8,6 +8,8 @@ from numbers import Integral, Real
 import numpy as np
 from sklearn import get_config
 from sklearn.base import BaseEstimator, ClassifierMixin, _fit_context
+from sklearn.compose import ColumnTransformer
+from sklearn.pipeline import FeatureUnion, Pipeline, make_pipeline
 from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.multiclass import check_classification_targets
@@ -15,6 +17,8 @@ from sklearn.utils.validation import check_array, check_is_fitted, validate_data
 from threadpoolctl import threadpool_limits
 
 from skpcd.classification._unknown import best_or_unknown, unknown_label_for
+from skpcd.features import ImprovedPFHTransformer, OverallDescriptor
+from skpcd.features._overall import OVERALL_NAMES
 from skpcd.utils._parallel import effective_threads, map_batches, task_threads
 
 __all__ = ["CaseBasedClassifier", "case_similarity", "make_case_based_pipeline"]
@@ -665,11 +669,6 @@ class CaseBasedClassifier(ClassifierMixin, BaseEstimator):
 
 
 def _volume_only(box):
-    from sklearn.compose import ColumnTransformer
-    from sklearn.pipeline import Pipeline
-
-    from skpcd.features import OverallDescriptor
-    from skpcd.features._overall import OVERALL_NAMES
 
     column = OVERALL_NAMES.index("volume")
     return Pipeline(
@@ -721,9 +720,6 @@ def make_case_based_pipeline(descriptor=None, *, volume=True, box="aabb", **para
     >>> model.fit(clouds[::2], labels[::2]).predict(clouds[1::2]).shape
     (15,)
     """
-    from sklearn.pipeline import FeatureUnion, make_pipeline
-
-    from skpcd.features import ImprovedPFHTransformer
 
     if "volume_column" in params:
         raise TypeError("volume_column is set by the volume parameter")

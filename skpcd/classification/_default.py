@@ -3,8 +3,14 @@
 from sklearn.ensemble import RandomForestClassifier
 from sklearn.pipeline import FeatureUnion, make_pipeline
 
+from skpcd.classification._case_based import make_case_based_pipeline
 from skpcd.classification._reject import RejectUnknown
-from skpcd.features import PFHTransformer, ShapeFeatures, VerticalProfile
+from skpcd.features import (
+    ImprovedPFHTransformer,
+    PFHTransformer,
+    ShapeFeatures,
+    VerticalProfile,
+)
 
 __all__ = ["PIPELINES", "make_default_pipeline", "make_named_pipeline"]
 
@@ -131,8 +137,6 @@ def make_named_pipeline(name, *, random_state=0, n_jobs=None):
     >>> make_named_pipeline("case-based").steps[-1][0]
     'casebasedclassifier'
     """
-    from skpcd.classification._case_based import make_case_based_pipeline
-    from skpcd.features import ImprovedPFHTransformer
 
     if name == "default":
         return make_default_pipeline(random_state=random_state, n_jobs=n_jobs)

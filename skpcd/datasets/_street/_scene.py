@@ -9,6 +9,7 @@ ray casting and returns every return with its class and instance.
 from numbers import Integral, Real
 
 import numpy as np
+from scipy.spatial import cKDTree
 from sklearn.utils import Bunch, check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions, validate_params
 
@@ -19,6 +20,7 @@ from skpcd.datasets._street._layout import (
     build_scene,
     furnish,
 )
+from skpcd.datasets._street._raycast import ELLIPSOID
 from skpcd.datasets._street._scanners import (
     SCAN_PATTERNS,
     apply_footprint,
@@ -60,7 +62,6 @@ def _porous(scene):
     """Primitives a wide beam sees as porous: foliage clusters (every
     ellipsoid a ray may cross, in trees, bushes and planters) and fence
     mesh, not glass."""
-    from skpcd.datasets._street._raycast import ELLIPSOID
 
     return (scene["hit"] < 1.0) & (
         (scene["kind"] == ELLIPSOID) | (scene["class_id"] == _FENCE)
@@ -314,7 +315,6 @@ def _attach_ground(obj, base_z, ground_sorted, ground_x, margin):
     cand = cand[(cand[:, 1] >= lo[1]) & (cand[:, 1] <= hi[1])]
     if not len(cand):
         return obj
-    from scipy.spatial import cKDTree
 
     d, _ = cKDTree(base[:, :2]).query(cand[:, :2], distance_upper_bound=margin)
     return np.vstack([obj, cand[np.isfinite(d)]])
