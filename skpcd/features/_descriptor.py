@@ -82,9 +82,6 @@ class FeatureNamesMixin:
         """
         return np.asarray(self._feature_names(), dtype=object)
 
-    def _feature_names(self):
-        raise NotImplementedError(f"{type(self).__name__} must define _feature_names")
-
 
 class SegmentDescriptor(FeatureNamesMixin, CloudTransformer):
     """Base of the descriptors of whole segments from their xyz.
