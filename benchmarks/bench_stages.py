@@ -123,6 +123,12 @@ def main():
     parser.add_argument("--scans", default=str(SCANS))
     parser.add_argument("--stage", help=argparse.SUPPRESS)
     parser.add_argument("--out", default=None)
+    parser.add_argument(
+        "--merge",
+        default=None,
+        help="a results file of an earlier run of the same two commits: its stages "
+        "not measured now are kept (each stage records the date of its run)",
+    )
     args = parser.parse_args()
     if args.stage:
         print(run_stage(args.stage, args.scans))
@@ -148,6 +154,7 @@ def main():
         best = {k: min(v) for k, v in times.items()}
         result["stages"][stage] = {
             **best, "ratio": best["after"] / best["before"], "times": times,
+            "date": result["date"],
         }  # fmt: skip
         ratio = best["after"] / best["before"]
         print(
@@ -156,6 +163,14 @@ def main():
             flush=True,
         )
     result["load_end"] = list(os.getloadavg())
+    if args.merge:
+        earlier = json.loads(Path(args.merge).read_text())
+        if earlier["commit"] != result["commit"]:
+            raise SystemExit(
+                f"{args.merge} compares other commits: {earlier['commit']}"
+            )
+        kept = {k: v for k, v in earlier["stages"].items() if k not in result["stages"]}
+        result["stages"] = {**kept, **result["stages"]}
     if args.out:
         Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
 
