@@ -493,6 +493,18 @@ def _few_shot(data):
     return header, rows, provenance(data)
 
 
+def _stages(data):
+    rows = []
+    for stage, best in data["stages"].items():
+        before, after = best["before"], best["after"]
+        rows.append([Text(stage), num(before, 3), num(after, 3), ratio(after, before)])
+    header = ["stage", "before, s", "after, s", "after / before"]
+    where = provenance(data)
+    commits = data["commit"]
+    where["commit"] = f"{commits['before']} (before), {commits['after']} (after)"
+    return header, rows, where
+
+
 def _sim_to_real(data):
     rows = [
         [
@@ -614,6 +626,12 @@ TABLES = {
         "Real car-mounted sweeps: the shipped street model with no label, and a "
         "few real labels per class with and without simulated objects (mean over "
         "the draws of the labels).",
+    ),
+    "stages": Table(
+        "stages.json",
+        _stages,
+        "Each stage before and after a change that should not change speed (best "
+        "times; a fresh process each, the two checkouts alternating).",
     ),
     "sim_to_real": Table(
         "sim_to_real.json",
