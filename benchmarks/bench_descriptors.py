@@ -38,7 +38,6 @@ import datetime
 import json
 import os
 import platform
-import resource
 import shutil
 import subprocess
 import sys
@@ -47,6 +46,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+from measure import (
+    cpu_model,
+    import_open3d,
+    loadavg,
+    maxrss_mb,
+    reset_peak,
+    rss_now_mb,
+)
 
 ROOT = Path(__file__).resolve().parent
 DEFAULT_DATA = str(ROOT.parents[1] / "shared" / "data" / "dales_objects")
@@ -70,11 +77,6 @@ MB = 1024.0**2
 # machine
 
 
-def _loadavg():
-    with open("/proc/loadavg") as f:
-        return [float(x) for x in f.read().split()[:3]]
-
-
 def _cpu_jiffies():
     with open("/proc/stat") as f:
         vals = [int(x) for x in f.readline().split()[1:]]
@@ -82,36 +84,7 @@ def _cpu_jiffies():
     return dict(zip(names, vals))
 
 
-def _cpu_model():
-    with open("/proc/cpuinfo") as f:
-        for line in f:
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    return platform.processor()
-
-
-def _import_open3d():
-    """Import Open3D; its plotly viewer imports ``dash`` at import time.
-
-    When dash is not installed (installing it also installs a pytest plugin
-    that breaks pytest in the same environment), a stub module stands in for
-    it: the benchmark never opens a viewer.
-    """
-    try:
-        import dash  # noqa: F401
-    except ImportError:
-        import types
-
-        stub = types.ModuleType("dash")
-        stub.html = stub.dcc = types.ModuleType("dash.stub")
-        stub.Dash = object
-        sys.modules.setdefault("dash", stub)
-    import open3d
-
-    return open3d
-
-
-def _versions():
+def versions():
     import numba
     import scipy
 
@@ -125,51 +98,12 @@ def _versions():
         "skpcd": skpcd.__version__,
     }
     try:
-        open3d = _import_open3d()
+        open3d = import_open3d()
 
         out["open3d"] = open3d.__version__
     except ImportError:
         out["open3d"] = None
     return out
-
-
-def _maxrss_mb():
-    """Peak RSS in MB since the last :func:`_reset_peak`.
-
-    VmHWM, which clear_refs resets; ``ru_maxrss`` keeps the peak of the
-    whole process (data loading included) and would overstate the call's.
-    """
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 1024.0
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-
-
-def _rss_now_mb():
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024.0
-    return float("nan")
-
-
-def _reset_peak():
-    """Reset the peak RSS to the current RSS; returns the current RSS in MB.
-
-    Imports (LLVM) and data loading have transient peaks that would hide the
-    peak of the measured call; writing 5 to /proc/self/clear_refs resets the
-    high-water mark that ru_maxrss reports (Linux >= 4.0).
-    """
-    import gc
-
-    gc.collect()
-    try:
-        with open("/proc/self/clear_refs", "w") as f:
-            f.write("5")
-    except OSError:
-        pass
-    return _rss_now_mb()
 
 
 # ----------------------------------------------------------------------------
@@ -263,7 +197,7 @@ def _worker_skpcd(spec, clouds):
 
     rng = np.random.default_rng(0)
     make().fit_transform([rng.random((300, 3)) * 3, rng.random((200, 3)) * 3])
-    rss_warm = _reset_peak()
+    rss_warm = reset_peak()
     out_bytes = [0]
 
     def run():
@@ -277,7 +211,7 @@ def _worker_skpcd(spec, clouds):
 
 
 def _worker_open3d(spec, clouds):
-    o3d = _import_open3d()
+    o3d = import_open3d()
 
     if spec["tool"] == "open3d_t":  # the tensor API, on the CPU
         treg = o3d.t.pipelines.registration
@@ -319,7 +253,7 @@ def _worker_open3d(spec, clouds):
         return h.nbytes
 
     one(np.random.default_rng(0).random((500, 3)) * 3, [0.0, 0.0, 0.0])
-    rss_warm = _reset_peak()
+    rss_warm = reset_peak()
     out_bytes = [0]
 
     def run():
@@ -384,16 +318,16 @@ def _worker_profile(spec, clouds):
 
 def _worker(spec):
     w0 = time.perf_counter()
-    rss0 = _rss_now_mb()
+    rss0 = rss_now_mb()
     import skpcd.features
     import skpcd.preprocessing  # noqa: F401
 
     if spec["tool"] in ("open3d", "open3d_t"):
-        _import_open3d()
+        import_open3d()
     clouds = _clouds(spec)
     in_bytes = sum(c.nbytes for c in clouds)
     n_points = sum(len(c) for c in clouds)
-    rss_load = _rss_now_mb()
+    rss_load = rss_now_mb()
     res = {
         "n_points": n_points,
         "n_clouds": len(clouds),
@@ -407,7 +341,7 @@ def _worker(spec):
         return res
     fn = _worker_skpcd if spec["tool"] == "skpcd" else _worker_open3d
     runs, rss_warm, out_bytes, extra = fn(spec, clouds)
-    peak = _maxrss_mb()
+    peak = maxrss_mb()
     res.update(
         runs=runs,
         out_bytes=out_bytes,
@@ -671,10 +605,10 @@ def main(argv=None):
     jiff0 = _cpu_jiffies()
     machine = {
         "nproc": os.cpu_count(),
-        "cpu_model": _cpu_model(),
+        "cpu_model": cpu_model(),
         "mem_gb": os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9,
-        "load_start": _loadavg(),
-        "versions": _versions(),
+        "load_start": loadavg(),
+        "versions": versions(),
         "platform": platform.platform(),
     }
     print(f"load average at start: {machine['load_start']}", flush=True)
@@ -697,7 +631,7 @@ def main(argv=None):
         jiff1 = _cpu_jiffies()
         d = {k: jiff1[k] - jiff0[k] for k in jiff0}
         machine["steal_pct"] = 100.0 * d["steal"] / max(1, sum(d.values()))
-        machine["load_end"] = _loadavg()
+        machine["load_end"] = loadavg()
         shutil.rmtree(tmp, ignore_errors=True)
         text = _report(R)
         print("\n" + text)
@@ -756,7 +690,7 @@ def _main(a, R, groups, tmp):
     del clouds
 
     def case(name, layout, tool, fn):
-        load = _loadavg()[0]
+        load = loadavg()[0]
         print(
             f"[{time.strftime('%H:%M:%S')} load {load:.1f}] {name} {layout} {tool} ...",
             end=" ",

@@ -57,7 +57,7 @@ from skpcd.io import read_segments
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from bench_simulation import _commit  # noqa: E402
+from measure import commit  # noqa: E402
 
 REAL = HERE.parent.parent / "shared/data/real_mobile/objects"
 ALIASES = {"other_object": "other"}
@@ -204,7 +204,7 @@ def main(argv=None):
             for k, v in SimulationAugmented(**kw).get_params().items()
             if k != "estimator"
         },
-        "commit": _commit(),
+        "commit": commit(),
         "machine": f"{platform.machine()} {os.cpu_count()} cores",
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "street_model": load_street_model(return_info=True)[1]["metadata"][

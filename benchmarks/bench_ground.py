@@ -49,7 +49,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from bench_descriptors import _maxrss_mb, _reset_peak  # noqa: E402
+from measure import maxrss_mb, reset_peak  # noqa: E402
 
 DALES = Path(
     os.environ.get(
@@ -184,11 +184,11 @@ def worker(name, n, path):
     points = np.ascontiguousarray(np.load(path, mmap_mode="r")[:n])
     # compile the kernels (and load CSF) on a small scene first
     GroundFilter(**params).fit_predict(points[:20000])
-    base = _reset_peak()
+    base = reset_peak()
     t = time.perf_counter()
     g = GroundFilter(**params).fit_predict(points)
     dt = time.perf_counter() - t
-    peak = _maxrss_mb()
+    peak = maxrss_mb()
     print(
         json.dumps(
             {
@@ -207,7 +207,7 @@ def memory(sizes, folder):
         from skpcd.datasets import make_street_scene
 
         print("simulating the big street scan...", flush=True)
-        s = make_street_scene(BIG["length"], scanner="mobile", **_big_kw())
+        s = make_street_scene(BIG["length"], scanner="mobile", **big_kw())
         np.save(path, s.points)
         del s
     total = len(np.load(path, mmap_mode="r"))
@@ -236,7 +236,7 @@ def memory(sizes, folder):
     return out
 
 
-def _big_kw():
+def big_kw():
     return {"random_state": BIG["random_state"]}
 
 

@@ -31,9 +31,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent
 sys.path.insert(0, str(ROOT))
 
-from bench_descriptors import _maxrss_mb, _reset_peak  # noqa: E402
-from bench_simulation import _commit  # noqa: E402
-from bench_threads import _dales  # noqa: E402
+from bench_threads import dales  # noqa: E402
+from measure import (  # noqa: E402
+    commit,
+    maxrss_mb,
+    reset_peak,
+)
 
 K = 10
 
@@ -53,7 +56,7 @@ def _same(a, b):
 
 
 def _clouds():
-    cloud = np.vstack(_dales())
+    cloud = np.vstack(dales())
     return cloud, cloud[np.random.default_rng(0).permutation(len(cloud))]
 
 
@@ -65,9 +68,9 @@ def peak_worker(variant, threads):
     cloud = _clouds()[variant == "shuffled"]
     est = FPFHTransformer(n_neighbors=K, n_jobs=threads)
     est.fit_transform([cloud[:2000]])
-    base = _reset_peak()
+    base = reset_peak()
     out = est.fit_transform([cloud])
-    peak = _maxrss_mb() - base
+    peak = maxrss_mb() - base
     io = (cloud.nbytes + out[0].nbytes) / 2**20
     print(json.dumps({"variant": variant, "peak_mb": peak, "io_mb": io}))
 
@@ -146,7 +149,7 @@ def main(argv=None):
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(
             timespec="minutes"
         ),
-        "commit": _commit(),
+        "commit": commit(),
         "load_start": load0,
         "load_end": os.getloadavg(),
         "threads": a.threads,

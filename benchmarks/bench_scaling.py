@@ -70,7 +70,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from bench_descriptors import _cpu_model, _loadavg, _reset_peak  # noqa: E402
+from measure import cpu_model, loadavg, reset_peak  # noqa: E402
 
 DALES = Path(
     os.environ.get(
@@ -198,7 +198,7 @@ def _status_mb(field):
 
 def _worker_reset():
     """Reset the peak RSS of this process; its RSS now (MB)."""
-    return _reset_peak()
+    return reset_peak()
 
 
 def _worker_peak():
@@ -410,7 +410,7 @@ def run_worker(spec, timeout=None):
     for line in reversed(p.stdout.splitlines()):
         if line.startswith("RESULT "):
             out = json.loads(line[len("RESULT ") :])
-            out["load_after"] = _loadavg()
+            out["load_after"] = loadavg()
             return out
     return {
         "failed": f"exit {p.returncode} after {time.perf_counter() - start:.0f} s",
@@ -548,7 +548,7 @@ def _brief(r):
     )
 
 
-def _commit():
+def commit():
     """HEAD of the repository, and whether skpcd/ has uncommitted changes."""
 
     def git(*args):
@@ -629,7 +629,7 @@ def main(argv=None):
     out = Path(a.out)
     R = json.loads(out.read_text()) if out.exists() else {}
     R["machine"] = {
-        "cpu": _cpu_model(),
+        "cpu": cpu_model(),
         "cores": os.cpu_count(),
         "memory_gb": round(
             os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30, 1
@@ -648,11 +648,11 @@ def main(argv=None):
         ):
             if part not in parts:
                 continue
-            start = {"date": stamp, "command": cmd, "loadavg_start": _loadavg()}
-            start["commit"] = _commit()
+            start = {"date": stamp, "command": cmd, "loadavg_start": loadavg()}
+            start["commit"] = commit()
             R[key] = bench()
             R[key].update(start)
-            R[key]["loadavg_end"] = _loadavg()
+            R[key]["loadavg_end"] = loadavg()
             _write(out, R)
     print(report(R))
     return 0

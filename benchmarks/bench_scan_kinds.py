@@ -60,7 +60,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from bench_ground import dales_scenes_with_truth  # noqa: E402
-from bench_throughput import commit, machine  # noqa: E402
+from measure import commit, machine  # noqa: E402
 
 SHARED = HERE.parent.parent / "shared" / "data"
 REAL_MOBILE = Path(os.environ.get("SKPCD_REAL_MOBILE", SHARED / "real_mobile"))

@@ -41,15 +41,13 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-# the measuring helpers of the descriptor benchmark: VmHWM peak reset by
-# clear_refs, Open3D import without its viewer, machine description
-from bench_descriptors import (  # noqa: E402
-    _cpu_model,
-    _import_open3d,
-    _loadavg,
-    _maxrss_mb,
-    _reset_peak,
-    _versions,
+from bench_descriptors import versions  # noqa: E402
+from measure import (  # noqa: E402
+    cpu_model,
+    import_open3d,
+    loadavg,
+    maxrss_mb,
+    reset_peak,
 )
 
 DALES = Path(
@@ -134,7 +132,7 @@ def _worker(spec):
             return {"n_clusters": int(labels.labels_.max() + 1)}
 
     elif stage == "open3d":
-        o3d = _import_open3d()
+        o3d = import_open3d()
 
         def run():
             pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
@@ -148,11 +146,11 @@ def _worker(spec):
 
     else:
         raise ValueError(stage)
-    base = _reset_peak()
+    base = reset_peak()
     start = time.perf_counter()
     out.update(run())
     out["seconds"] = time.perf_counter() - start
-    out["peak_mb"] = _maxrss_mb() - base
+    out["peak_mb"] = maxrss_mb() - base
     out["input_mb"] = points.nbytes / 2**20
     print(json.dumps(out))
 
@@ -258,11 +256,11 @@ def main(argv=None):
     skip = set(filter(None, a.skip.split(",")))
     R = {
         "machine": {
-            "cpu": _cpu_model(),
+            "cpu": cpu_model(),
             "cores": os.cpu_count(),
-            "loadavg_start": _loadavg(),
+            "loadavg_start": loadavg(),
         },
-        "versions": _versions(),
+        "versions": versions(),
         "min_samples": MIN_SAMPLES,
         "n_jobs": N_JOBS,
         "cap_gb": a.cap_gb,
@@ -298,7 +296,7 @@ def main(argv=None):
             R["runs"].append(run)
             print(_row_text(run))
             sys.stdout.flush()
-    R["machine"]["loadavg_end"] = _loadavg()
+    R["machine"]["loadavg_end"] = loadavg()
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(R, indent=1))

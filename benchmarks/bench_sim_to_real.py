@@ -63,7 +63,7 @@ from skpcd.io import read_segments
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from bench_simulation import _commit  # noqa: E402
+from measure import commit  # noqa: E402
 
 REAL = Path(
     os.environ.get(
@@ -229,7 +229,7 @@ def main(argv=None):
             flush=True,
         )
     meta = {
-        "commit": _commit(),
+        "commit": commit(),
         "machine": f"{platform.machine()} {os.cpu_count()} cores",
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "n_per_class": args.n_per_class,

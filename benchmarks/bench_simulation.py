@@ -21,11 +21,11 @@ import argparse
 import json
 import os
 import platform
-import subprocess
 import time
 from pathlib import Path
 
 import numpy as np
+from measure import commit
 
 from skpcd.datasets import make_street_objects
 from skpcd.datasets._street._layout import Street, build_scene, furnish
@@ -37,20 +37,6 @@ from skpcd.datasets._street._scanners import (
 )
 
 HERE = Path(__file__).resolve().parent
-
-
-def _commit():
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            capture_output=True,
-            text=True,
-            cwd=HERE,
-            check=True,
-        )
-        return out.stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def _timed(fn, repeat):
@@ -144,7 +130,7 @@ def main(argv=None):
         "default scan patterns (SCAN_PATTERNS)",
         f"machine: {platform.processor() or platform.machine()}, "
         f"nproc={os.cpu_count()}, load {tuple(round(x, 2) for x in os.getloadavg())}, "
-        f"commit {_commit()}",
+        f"commit {commit()}",
         f"best of {a.repeat}; cpu = CPU seconds of the process (one thread unless "
         "n_jobs=2)",
         "",

@@ -60,8 +60,8 @@ from sklearn.metrics import adjusted_rand_score
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from bench_descriptors import _import_open3d, _maxrss_mb, _reset_peak  # noqa: E402
 from bench_ground import dales_scenes_with_truth, street_scans  # noqa: E402
+from measure import import_open3d, maxrss_mb, reset_peak  # noqa: E402
 
 MIN_SIZE = 50
 METHODS = {
@@ -234,7 +234,7 @@ def worker(stage, n, path):
                 return DBSCAN(eps=eps, min_samples=5, n_jobs=2).fit(rest).labels_
 
         else:
-            o3d = _import_open3d()
+            o3d = import_open3d()
             pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(rest))
 
             def run():
@@ -253,11 +253,11 @@ def worker(stage, n, path):
         def run():
             return segment_scene(points, **kw).labels
 
-    base = _reset_peak()
+    base = reset_peak()
     t = time.perf_counter()
     labels = run()
     dt = time.perf_counter() - t
-    peak = _maxrss_mb() - base
+    peak = maxrss_mb() - base
     print(
         json.dumps(
             {

@@ -65,7 +65,7 @@ CORES = (8, 16, 64)
 K = 10
 
 
-def _dales():
+def dales():
     from skpcd.datasets import load_dales_objects
 
     folder = os.environ.get(
@@ -89,7 +89,7 @@ def _scene(clouds):
 
 def _stage(name, threads):
     """The call to time (a function of no argument) for ``name``."""
-    clouds = _dales()
+    clouds = dales()
     if name in ("search", "normals"):
         from skpcd.neighbors._neighbors import search_packed
         from skpcd.preprocessing._normals import normals_f32

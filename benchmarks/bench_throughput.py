@@ -61,7 +61,6 @@ date, the load average at its start and end, the commit and the machine.
 import argparse
 import json
 import os
-import platform
 import re
 import resource
 import shutil
@@ -70,6 +69,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from measure import commit, machine
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
@@ -124,11 +125,11 @@ def make_pipeline(name, n_jobs):
 
 def identify_worker(pipeline, dataset, n_jobs, quick):
     import numpy as np
-    from bench_descriptors import _maxrss_mb, _reset_peak
+    from measure import maxrss_mb, reset_peak
 
     clouds, y = load(dataset, quick)
     make_pipeline(pipeline, n_jobs).fit(clouds[::10], y[::10]).predict(clouds[::10])
-    base = _reset_peak()
+    base = reset_peak()
     model = make_pipeline(pipeline, n_jobs)
     t = time.perf_counter()
     model.fit(clouds, y)
@@ -144,7 +145,7 @@ def identify_worker(pipeline, dataset, n_jobs, quick):
                 "segments": len(clouds),
                 "points": int(sum(len(c) for c in clouds)),
                 "train_accuracy": float(np.mean(np.asarray(pred) == y)),
-                "peak_mb": _maxrss_mb() - base,
+                "peak_mb": maxrss_mb() - base,
             }
         )
     )
@@ -208,7 +209,7 @@ def make_scans(folder, sizes):
     """The LAS files of the first n points of the big mobile scan (subprocess:
     keeps the driver's peak RSS, the floor of every child's, small)."""
     import numpy as np
-    from bench_ground import BIG, _big_kw
+    from bench_ground import BIG, big_kw
 
     from skpcd.datasets import make_street_scene
     from skpcd.io import write_point_cloud
@@ -219,7 +220,7 @@ def make_scans(folder, sizes):
     if not todo:
         return
     log("simulating the big street scan...")
-    points = make_street_scene(BIG["length"], scanner="mobile", **_big_kw()).points
+    points = make_street_scene(BIG["length"], scanner="mobile", **big_kw()).points
     for s in todo:
         n = min(int(s * 1_000_000), len(points))
         write_point_cloud(folder / f"scan_{s:g}M.las", np.ascontiguousarray(points[:n]))
@@ -264,9 +265,9 @@ def reference_worker(tool, scan, out, eps):
 
         lab = DBSCAN(eps=eps, min_samples=MIN_SAMPLES, n_jobs=2).fit(pts).labels_
     else:
-        from bench_descriptors import _import_open3d
+        from measure import import_open3d
 
-        o3d = _import_open3d()
+        o3d = import_open3d()
         pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
         lab = np.asarray(pc.cluster_dbscan(eps, MIN_SAMPLES, print_progress=False))
     stages["cluster"] = time.perf_counter() - t
@@ -423,37 +424,6 @@ def summarise_segment(runs):
 
 
 # --- report -------------------------------------------------------------------
-
-
-def machine():
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next(s.split(":", 1)[1].strip() for s in f if "model name" in s)
-    except (OSError, StopIteration):
-        pass
-    return f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}"
-
-
-def commit():
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            capture_output=True,
-            text=True,
-            cwd=HERE,
-            check=True,
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
-            capture_output=True,
-            text=True,
-            cwd=HERE,
-            check=True,
-        ).stdout.strip()
-        return out + (" (with uncommitted changes)" if dirty else "")
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def write(results, out):
