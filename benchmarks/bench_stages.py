@@ -29,11 +29,12 @@ import argparse
 import glob
 import json
 import os
-import platform
 import subprocess
 import sys
 import time
 from pathlib import Path
+
+from measure import machine
 
 STAGES = (
     "read_las", "ground_smrf", "ground_csf", "segment", "pfh", "fpfh",
@@ -137,8 +138,7 @@ def main():
     result = {
         "date": time.strftime("%Y-%m-%dT%H:%M:%S"),
         "load_start": list(os.getloadavg()),
-        "machine": f"{platform.processor() or platform.machine()}, "
-        f"{os.cpu_count()} cores, {platform.system()} {platform.release()}",
+        "machine": machine(),
         "commit": {"before": _commit(before), "after": _commit(after)},
         "scans": str(args.scans),
         "rounds": args.rounds,
