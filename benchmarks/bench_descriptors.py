@@ -51,6 +51,7 @@ from measure import (
     import_open3d,
     loadavg,
     maxrss_mb,
+    provenance,
     reset_peak,
     rss_now_mb,
 )
@@ -637,7 +638,7 @@ def main(argv=None):
         print("\n" + text)
         if a.out:
             Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-            Path(a.out).write_text(json.dumps(R, indent=1) + "\n")
+            Path(a.out).write_text(json.dumps({**provenance(), **R}, indent=1) + "\n")
         txt = a.txt or (str(Path(a.out).with_suffix(".txt")) if a.out else None)
         if txt:
             Path(txt).write_text(text + "\n")

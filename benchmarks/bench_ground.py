@@ -49,7 +49,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from measure import maxrss_mb, reset_peak  # noqa: E402
+from measure import maxrss_mb, provenance, reset_peak  # noqa: E402
 
 DALES = Path(
     os.environ.get(
@@ -242,7 +242,9 @@ def big_kw():
 
 def write(results, out):
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.with_suffix(".json").write_text(json.dumps(results, indent=1))
+    out.with_suffix(".json").write_text(
+        json.dumps({**provenance(), **results}, indent=1)
+    )
     lines = [
         "skpcd ground removal benchmark (benchmarks/bench_ground.py), "
         + results["date"],

@@ -41,6 +41,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from measure import provenance
 
 ROOT = Path(__file__).resolve().parent
 DEFAULT_DATA = os.environ.get(
@@ -934,7 +935,9 @@ def main(argv=None):
         took = round(time.perf_counter() - t0, 1)
         res["meta"]["update_seconds" if a.update else "total_seconds"] = took
         Path(out).parent.mkdir(parents=True, exist_ok=True)
-        Path(out).write_text(json.dumps(res, indent=1, default=_json_default))
+        Path(out).write_text(
+            json.dumps({**provenance(), **res}, indent=1, default=_json_default)
+        )
         write_text(res, Path(out).with_suffix(".txt"))
 
     bof_cache = None

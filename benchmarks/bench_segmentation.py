@@ -47,6 +47,7 @@ from measure import (  # noqa: E402
     import_open3d,
     loadavg,
     maxrss_mb,
+    provenance,
     reset_peak,
 )
 
@@ -299,7 +300,7 @@ def main(argv=None):
     R["machine"]["loadavg_end"] = loadavg()
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(R, indent=1))
+    out.write_text(json.dumps({**provenance(), **R}, indent=1))
     text = report(R)
     out.with_suffix(".txt").write_text(text)
     print(text)

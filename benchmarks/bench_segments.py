@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from measure import provenance
 
 ROOT = Path(__file__).resolve().parent
 DEFAULT_DATA = str(ROOT.parents[1] / "shared" / "data" / "dales_objects")
@@ -92,7 +93,10 @@ def main(argv=None):
     if a.out:
         Path(a.out).parent.mkdir(parents=True, exist_ok=True)
         Path(a.out).write_text(
-            json.dumps({"n_segments": len(clouds), "rows": rows}, indent=1) + "\n"
+            json.dumps(
+                {**provenance(), "n_segments": len(clouds), "rows": rows}, indent=1
+            )
+            + "\n"
         )
         Path(a.out).with_suffix(".txt").write_text("\n".join(text) + "\n")
     return 0

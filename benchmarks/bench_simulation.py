@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from measure import commit
+from measure import commit, provenance
 
 from skpcd.datasets import make_street_objects
 from skpcd.datasets._street._layout import Street, build_scene, furnish
@@ -157,7 +157,13 @@ def main(argv=None):
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(
             json.dumps(
-                {"rows": rows, "objects": objects, "load": os.getloadavg()}, indent=1
+                {
+                    **provenance(),
+                    "rows": rows,
+                    "objects": objects,
+                    "load": os.getloadavg(),
+                },
+                indent=1,
             )
             + "\n"
         )

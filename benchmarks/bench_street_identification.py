@@ -61,6 +61,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from measure import provenance
 
 ROOT = Path(__file__).resolve().parent
 DEFAULT_DATA = os.environ.get(
@@ -583,7 +584,7 @@ def main():
     out = Path(args.out)
     if args.quick and out.name == "street_identification.json":
         out = out.with_name("street_identification_quick.json")
-    out.write_text(json.dumps(res, indent=1, default=str))
+    out.write_text(json.dumps({**provenance(), **res}, indent=1, default=str))
     out.with_suffix(".txt").write_text(report(res))
     print(report(res))
 

@@ -61,7 +61,7 @@ from sklearn.metrics import adjusted_rand_score
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from bench_ground import dales_scenes_with_truth, street_scans  # noqa: E402
-from measure import import_open3d, maxrss_mb, reset_peak  # noqa: E402
+from measure import import_open3d, maxrss_mb, provenance, reset_peak  # noqa: E402
 
 MIN_SIZE = 50
 METHODS = {
@@ -305,7 +305,9 @@ def timing(sizes, path, stages=STAGES):
 
 def write(results, out):
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.with_suffix(".json").write_text(json.dumps(results, indent=1))
+    out.with_suffix(".json").write_text(
+        json.dumps({**provenance(), **results}, indent=1)
+    )
     lines = [
         "skpcd street segmentation benchmark "
         "(benchmarks/bench_street_segmentation.py), " + results["date"],

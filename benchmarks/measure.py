@@ -5,6 +5,7 @@ Each script records :func:`commit` and :func:`machine` in its results file, so
 that the Performance page can say where each figure came from.
 """
 
+import datetime
 import gc
 import os
 import platform
@@ -22,6 +23,7 @@ __all__ = [
     "loadavg",
     "machine",
     "maxrss_mb",
+    "provenance",
     "reset_peak",
     "rss_now_mb",
 ]
@@ -132,3 +134,13 @@ def reset_peak():
     except OSError:
         pass
     return rss_now_mb()
+
+
+def provenance():
+    """``{"commit", "machine", "date"}`` of a run, for the top of a results
+    file (the Performance page reads them there)."""
+    return {
+        "commit": commit(),
+        "machine": machine(),
+        "date": datetime.datetime.now().isoformat(timespec="seconds"),
+    }
