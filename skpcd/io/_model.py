@@ -32,7 +32,6 @@ import joblib
 import numpy as np
 import sklearn
 from sklearn.base import BaseEstimator
-from sklearn.tree._tree import Tree
 
 from skpcd import __version__
 from skpcd.exceptions import (
@@ -472,6 +471,8 @@ def _check_trees(path, model):
     hands its trees its own input unchecked, so they must expect as many
     features as it does.
     """
+    # loaded here: scikit-learn's tree module takes a quarter of a second to import
+    from sklearn.tree._tree import Tree
 
     seen = set()
     stack = [(model, None)]

@@ -12,7 +12,8 @@ and no structures, tile by tile (:func:`tile_scene`) for scans larger than
 memory.
 """
 
-from skpcd.datasets._object_scene import make_scene
+import importlib
+
 from skpcd.segmentation._clusters import EuclideanClusters, euclidean_clusters
 from skpcd.segmentation._dbscan import AutoEpsDBSCAN, estimate_eps
 from skpcd.segmentation._eps_plot import plot_eps_curve
@@ -47,3 +48,11 @@ __all__ = [
     "sweep_coordinates",
     "tile_scene",
 ]
+
+
+def __getattr__(name):
+    # make_scene lives in skpcd.datasets; loaded when asked for, so that
+    # importing skpcd.segmentation does not load the street simulator
+    if name == "make_scene":
+        return importlib.import_module("skpcd.datasets").make_scene
+    raise AttributeError(f"module 'skpcd.segmentation' has no attribute {name!r}")
