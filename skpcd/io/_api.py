@@ -22,6 +22,7 @@ from skpcd.exceptions import (
     PointCloudFileError,
 )
 from skpcd.io._atomic import atomic_path
+from skpcd.io._common import take_rows
 
 __all__ = [
     "SUPPORTED_EXTENSIONS",
@@ -206,8 +207,7 @@ def read_point_cloud(path, *, fields=None, nonfinite="drop"):
             NonFiniteWarning,
             stacklevel=2,
         )
-        points = points[finite]
-        extras = {name: values[finite] for name, values in extras.items()}
+        points, extras = take_rows(finite, points, extras)
     if fields is None:
         return points
     return points, extras

@@ -192,6 +192,26 @@ def ascii_rows(formats, columns):
     return out.getvalue().encode("ascii")
 
 
+def take_rows(keep, points, *columns):
+    """``points`` and every dict of per-point ``columns`` at the rows ``keep``.
+
+    Parameters
+    ----------
+    keep : ndarray of bool or int
+        The rows to keep.
+    points : ndarray of shape (n, ...)
+        Per-point values.
+    *columns : dict of str to ndarray
+        More per-point values, each of length ``n``.
+
+    Returns
+    -------
+    taken : tuple
+        ``points[keep]``, then each dict with its values at ``keep``.
+    """
+    return (points[keep], *({k: v[keep] for k, v in c.items()} for c in columns))
+
+
 def check_chunk_size(chunk_size):
     """``chunk_size`` as an int, if it is a positive integer (else ValueError)."""
     if (

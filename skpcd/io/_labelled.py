@@ -19,7 +19,7 @@ import numpy as np
 from skpcd.exceptions import MissingFileError, NonFiniteWarning, PointCloudFileError
 from skpcd.io._api import SUPPORTED_EXTENSIONS, read_point_cloud, write_point_cloud
 from skpcd.io._atomic import atomic_path
-from skpcd.io._common import check_chunk_size
+from skpcd.io._common import check_chunk_size, take_rows
 from skpcd.io._las_reader import checked_chunks, open_checked, read_vlr_records
 from skpcd.io._las_structure import decoding, import_laspy
 from skpcd.io._las_writer import write as write_las
@@ -378,9 +378,7 @@ def _in_memory(source, output, arrays, class_names, score_name, keep_fields):
                 NonFiniteWarning,
                 stacklevel=3,
             )
-            points = points[finite]
-            fields = {k: v[finite] for k, v in fields.items()}
-            values = {k: v[finite] for k, v in values.items()}
+            points, fields, values = take_rows(finite, points, fields, values)
         _write_las_memory(output, points, fields, values, class_names, score_name)
         return
     if has_ground and "classification" in fields:
