@@ -23,7 +23,14 @@ from skpcd.segmentation.ground._raster_kernels import cell_mean, cell_minimum
 from skpcd.segmentation.ground._terrain import Terrain
 from skpcd.utils._geometry import point_bounds
 
-__all__ = ["csf_ground", "csf_terrain"]
+__all__ = [
+    "ISLAND_CELLS",
+    "MIN_ISLAND_POINTS",
+    "csf_ground",
+    "csf_terrain",
+    "fill_points",
+    "simulate_cloth",
+]
 
 _MISSING = (
     "GroundFilter(method='csf') needs the reference cloth simulation filter, "
@@ -94,7 +101,7 @@ def csf_ground(
 
     Notes
     -----
-    Groups of points more than ``2 * _ISLAND_CELLS`` cloth cells (20 m at
+    Groups of points more than ``2 * ISLAND_CELLS`` cloth cells (20 m at
     1 m) apart are filtered separately, each under its own cloth; a group
     of fewer than 10 points is ground. Empty parts of a group's bounding
     box far from its points are filled (:func:`_far_fill`).
@@ -112,10 +119,10 @@ def csf_ground(
         "time_step": time_step,
     }
     _, nx, ny, cells = cell_indices(xyz, float(cloth_resolution))
-    if nx * ny <= max(len(xyz), 4 * _ISLAND_CELLS**2):
+    if nx * ny <= max(len(xyz), 4 * ISLAND_CELLS**2):
         rects, label = np.array([[0, 0, nx - 1, ny - 1]]), None
     else:
-        rects, label = islands(cells, _ISLAND_CELLS)
+        rects, label = islands(cells, ISLAND_CELLS)
     del cells
     sizes = (rects[:, 2:] - rects[:, :2] + 1).prod(axis=1)
     if sizes.sum() > MAX_CELLS:
@@ -130,7 +137,7 @@ def csf_ground(
     bounds = np.searchsorted(label[order], np.arange(len(rects) + 1))
     for i in range(len(rects)):  # a loop over islands, not points
         mine = order[bounds[i] : bounds[i + 1]]
-        if len(mine) < _MIN_ISLAND_POINTS:
+        if len(mine) < MIN_ISLAND_POINTS:
             # a lone point (an outlier far away) lies on its own terrain
             ground[mine] = True
             continue
@@ -143,9 +150,9 @@ def csf_ground(
 # occupied parts of the scene, not its bounding box (an outlier 100 km
 # away would make a cloth of 10**10 particles, which the reference code
 # aborts on).
-_ISLAND_CELLS = 10
+ISLAND_CELLS = 10
 # An island of fewer points is ground (a lone point lies on its terrain).
-_MIN_ISLAND_POINTS = 10
+MIN_ISLAND_POINTS = 10
 
 
 def _csf_once(
@@ -153,7 +160,11 @@ def _csf_once(
     time_step,
 ):  # fmt: skip
     """The reference CSF on one group of points."""
-    CSF = _import_csf()
+    params = {
+        "cloth_resolution": cloth_resolution, "class_threshold": class_threshold,
+        "rigidness": rigidness, "slope_smooth": slope_smooth,
+        "iterations": iterations, "time_step": time_step,
+    }  # fmt: skip
     ground = np.zeros(len(xyz), dtype=bool)
     # CSF works in float64 but loses precision on large coordinates (UTM):
     # simulate around the scene's corner
@@ -162,19 +173,9 @@ def _csf_once(
     if len(fill):
         shifted = np.vstack([shifted, fill])
     del fill
-    csf = CSF.CSF()
-    csf.params.cloth_resolution = float(cloth_resolution)
-    csf.params.class_threshold = float(class_threshold)
-    csf.params.rigidness = int(rigidness)
-    csf.params.bSloopSmooth = bool(slope_smooth)
-    csf.params.interations = int(iterations)
-    csf.params.time_step = float(time_step)
-    on, off = CSF.VecInt(), CSF.VecInt()
-    # the cloth is not exported (no file written); the progress messages
-    # are silenced. One OpenMP thread: with several, the reference code's
-    # parallel loops race and the ground flags change from run to run (tens
-    # of points of a 90 k point scene, measured with 2 threads)
-    with _quiet_stdout(), threadpool_limits(limits=1, user_api="openmp"):
+    csf = _configured(params)
+    on, off = _import_csf().VecInt(), _import_csf().VecInt()
+    with _reference_run():
         csf.setPointCloud(shifted)
         del shifted
         csf.do_filtering(on, off, False)
@@ -189,6 +190,54 @@ def _csf_once(
         idx = _indices(off)
         ground[idx[idx < n]] = False
     return ground
+
+
+def simulate_cloth(pts, params):
+    """The settled cloth of the reference CSF over a cloud.
+
+    Parameters
+    ----------
+    pts : ndarray of shape (n, 3)
+        The cloud, shifted to its corner (as :func:`_csf_once` gives it).
+    params : dict
+        The keyword arguments of :func:`csf_ground`.
+
+    Returns
+    -------
+    heights : ndarray of shape (n_particles,)
+        Each particle's height in CSF's frame (z down), rows of ``width``.
+    width : int
+        Particles per row.
+    """
+    csf = _configured(params)
+    with _reference_run():
+        csf.setPointCloud(np.ascontiguousarray(pts, dtype=np.float64))
+        nodes = np.asarray(csf.do_cloth_export()).reshape(-1, 3)
+    # exported as (x, y, -height) per particle, row after row
+    width = int(np.count_nonzero(nodes[:, 1] == nodes[0, 1]))
+    return -nodes[:, 2], width
+
+
+def _configured(params):
+    """A reference CSF object with ``params`` (those of :func:`csf_ground`)."""
+    csf = _import_csf().CSF()
+    csf.params.cloth_resolution = float(params["cloth_resolution"])
+    csf.params.class_threshold = float(params["class_threshold"])
+    csf.params.rigidness = int(params["rigidness"])
+    csf.params.bSloopSmooth = bool(params["slope_smooth"])
+    csf.params.interations = int(params["iterations"])
+    csf.params.time_step = float(params["time_step"])
+    return csf
+
+
+@contextlib.contextmanager
+def _reference_run():
+    """Around a run of the reference code: its progress messages silenced,
+    one OpenMP thread (with several, its parallel loops race and the ground
+    flags change from run to run: tens of points of a 90 k point scene,
+    measured with 2 threads)."""
+    with _quiet_stdout(), threadpool_limits(limits=1, user_api="openmp"):
+        yield
 
 
 # Empty cells at least this many cloth cells from every point are filled
@@ -220,6 +269,16 @@ def _far_fill(xyz, cell):
         return np.zeros((0, 3))
     zmin = np.full((ny, nx), np.inf)
     cell_minimum(xyz, 0.0, 0.0, cell, nx, ny, 0, 0, zmin)
+    return fill_points(zmin, cell)
+
+
+def fill_points(zmin, cell):
+    """The fill points of :func:`_far_fill` from the lowest z of each cell
+    (``zmin``, +inf where empty, cells of ``cell`` from the scene's corner).
+    """
+    ny, nx = zmin.shape
+    if nx * ny > _MAX_FILL_CELLS or nx * ny <= 1:
+        return np.zeros((0, 3))
     empty = ~np.isfinite(zmin)
     dist, (ri, ci) = ndimage.distance_transform_edt(empty, return_indices=True)
     far = dist >= _FILL_DISTANCE
