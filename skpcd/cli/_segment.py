@@ -36,7 +36,7 @@ def add_segmentation_options(p):
         "scan is (aerial for an airborne tile, street for the others; said on "
         "stderr); street, the cloth simulation filter with the bases of objects "
         "given back; csf, the cloth simulation filter alone; aerial or mobile, "
-        "SMRF (the only ones with --tile-size); or none (default auto)",
+        "SMRF; or none (default auto)",
     )
     p.add_argument(
         "--sensor",

@@ -146,8 +146,7 @@ def segment_scene(
         :func:`describe_scan` what the scan is and takes
         ``SCAN_KINDS[kind]["ground"]``: "aerial" for an airborne scan,
         "street" for the others; with ``tile_size`` the kind is told from
-        a sample of the scan and the filter is "aerial" or "mobile" (SMRF,
-        see Notes). The filter runs on the threads of ``n_jobs`` (one of
+        a sample of the scan. The filter runs on the threads of ``n_jobs`` (one of
         your own keeps its ``n_jobs`` unless None).
     sensor : array-like of shape (3,) or None, default=None
         With ``ground="auto"``, the position of the sensor of a single
@@ -204,12 +203,13 @@ def segment_scene(
         Overlap loaded around each tile. None picks the smallest that keeps
         the result equal to the untiled one (a smaller buffer, at least
         ``2 * eps``, keeps the clustering exact but lets the ground filter
-        differ near tile borders): the ground filter's reach,
+        differ near tile borders): the reach of the SMRF filter,
         ``(3 * ceil(window / cell) + 11) * cell`` plus two cells, 1 % more
-        (67.7 m for ``"aerial"``, 36.9 m for ``"mobile"``), and at least
-        ``2 * eps``; without ground removal and with ``eps=None``, a quarter
-        of the tile. Tiles should be several times larger than their
-        buffer, or the overlap dominates the work.
+        (67.7 m for ``"aerial"``, 36.9 m for ``"mobile"``; for ``"street"``
+        that of its bases pass; CSF needs none), and at least ``2 * eps``;
+        with ``eps=None`` and no SMRF, a quarter of the tile. Tiles should
+        be several times larger than their buffer, or the overlap dominates
+        the work.
     temp_folder : str or path-like, default=None
         Where the tile files and the result arrays are spilled with
         ``tile_size`` (the system's temporary folder when None); it needs
@@ -282,21 +282,31 @@ def segment_scene(
     (:func:`~skpcd.datasets.make_scene`): ``benchmarks/bench_ground.py`` and
     ``benchmarks/bench_street_segmentation.py``, numbers in the user guide.
 
-    With ``tile_size``, the ground filter must be SMRF and ``structures``
-    False (a ValueError otherwise): CSF lets a cloth fall over the whole
-    scene and the structures are found from pieces of any size, so neither
-    has the bounded reach that makes the tiled result the in-memory one.
+    With ``tile_size``, ``structures`` must be False (a ValueError
+    otherwise): the structures are found from pieces of any size, which
+    have no bounded reach that would make the tiled result the in-memory
+    one. With ``tile_size``, ``ground="auto"`` does not use the relative
+    radius of a single sweep (see :func:`describe_scan`): a sweep small
+    enough for it is segmented in memory.
 
     With ``tile_size``, the scan is read chunk by chunk and each point is
     written to the temporary file of every buffered tile holding it (its
     own tile, and the neighbours whose buffer reaches it). Then, tile by
     tile, with the tile's buffer:
 
-    1. the ground filter runs on the cells of the scene's raster that cover
-       the tile grown by the filter's reach (same cells as untiled), and
-       classifies the tile's own points: every step of the filter computes
-       a cell from the cells within a fixed distance (its reach), so these
-       are the untiled flags;
+    1. SMRF runs on the cells of the scene's raster that cover the tile
+       grown by the filter's reach (same cells as untiled), and classifies
+       the tile's own points: every step of the filter computes a cell
+       from the cells within a fixed distance (its reach), so these are
+       the untiled flags. CSF lets one cloth fall over the whole scan: the
+       reference simulation sees the points only through the nearest
+       point of each cloth particle, so two passes over the tiles gather
+       those (memory follows the cloth's particles, not the points), the
+       simulation runs once, and each tile's points are
+       tested against the cloth as CSF tests them: the untiled flags, bit
+       for bit. The ``keep_bases`` pass of ``"street"`` runs its SMRF on
+       the ground points tile by tile, with the spread of their heights
+       taken over the whole scan;
     2. with ``eps=None``, eps is estimated once for the whole scan, not per
        tile: the same random sample of non-ground points as the untiled
        estimate, their neighbours searched in their tile with its buffer,
@@ -407,18 +417,10 @@ def _segment_in_tiles(points, ground, sensor, structures, tiling, clustering):
         scan = describe_scan(
             sample, sensor=sensor, random_state=clustering["random_state"]
         )
-        ground = "aerial" if scan.kind == "airborne" else "mobile"
+        ground = SCAN_KINDS[scan.kind]["ground"]
     filt = _ground_filter(ground, clustering["n_jobs"])
-    if ground is not None:
+    if filt is not None:
         filt._validate_params()
-        if filt.method != "smrf":
-            raise ValueError(
-                f"ground={ground!r} uses the cloth simulation filter, which "
-                "simulates the whole scene at once: tile by tile it would "
-                "not give the in-memory result. With tile_size pass "
-                "ground='mobile' or 'aerial' (SMRF, exact tile by tile), "
-                "or segment in memory"
-            )
     if structures is not False:
         raise ValueError(
             "structures (facades, wires, trunk splitting) are found from "

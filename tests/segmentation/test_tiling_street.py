@@ -14,16 +14,17 @@ import numpy as np
 import pytest
 
 from skpcd.datasets import make_urban_objects
+from skpcd.io import read_point_cloud
 from skpcd.segmentation import GROUND_PRESETS, GroundFilter, TileGrid
 from skpcd.segmentation import segment_scene as _segment_scene
 from skpcd.segmentation.ground._filter import fit_window
 from skpcd.segmentation.ground._smrf import reach_cells
+from skpcd.segmentation.tiling._segment import chunked_nanmedian
 
 
 def segment_scene(*args, **kwargs):
-    """segment_scene with the settings the tiled path takes: an SMRF ground
-    preset ("aerial" unless given) and no structures (CSF and the
-    structures refuse tile_size, see test_structures.py)."""
+    """segment_scene with an SMRF ground preset ("aerial" unless given)
+    and no structures (the structures refuse tile_size)."""
     kwargs.setdefault("ground", "aerial")
     kwargs.setdefault("structures", False)
     return _segment_scene(*args, **kwargs)
@@ -212,6 +213,42 @@ def test_tiled_street_equals_untiled(street, tmp_path):
             path, ground="mobile", tile_size=size, temp_folder=tmp_path
         )
         _same(tiled, untiled)
+
+
+@pytest.mark.parametrize("ground", ["street", "csf"])
+def test_tiled_cloth_equals_untiled(street, ground, tmp_path):
+    # CSF: one cloth for the whole scan, built from one point per particle;
+    # "street" adds the keep_bases pass (SMRF on the ground points, tile by
+    # tile, and the spread of their heights over the whole scan)
+    path, points, _ = street
+    untiled = segment_scene(points, ground=ground)
+    assert untiled.n_segments >= 10
+    tiled = segment_scene(path, ground=ground, tile_size=40.0, temp_folder=tmp_path)
+    _same(tiled, untiled)
+
+
+def test_tiled_cloth_on_real_sweeps(real_sweeps, tmp_path):
+    # a KITTI sweep and a PandaSet one in world coordinates (islands of
+    # cells: a cloth each), with the default street ground
+    for path in (real_sweeps[0], real_sweeps[10]):
+        untiled = segment_scene(read_point_cloud(path), ground="street", eps=0.5)
+        tiled = segment_scene(
+            path, ground="street", eps=0.5, tile_size=30.0, temp_folder=tmp_path
+        )
+        _same(tiled, untiled)
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 5, 6, 1001])
+def test_chunked_nanmedian_is_numpys(n):
+    rng = np.random.default_rng(n)
+    values = np.abs(rng.normal(0.0, 0.05, n + 40))
+    values[rng.random(len(values)) < 0.2] = np.nan
+    values[:3] = 0.0  # ties and zeros
+    mask = rng.random(len(values)) < 0.7
+    mask[n:] = mask[n:] & (np.arange(len(values))[n:] < n + 3)
+    want = np.nanmedian(values[mask]) if (mask & ~np.isnan(values)).any() else np.nan
+    got = chunked_nanmedian(values, mask, 7)
+    assert np.array_equal(got, want, equal_nan=True)
 
 
 @pytest.mark.slow

@@ -9,7 +9,7 @@ import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
-from skpcd.segmentation.ground._bases import without_bases
+from skpcd.segmentation.ground._bases import BASE_THRESHOLD, BASES, without_bases
 from skpcd.segmentation.ground._csf import csf_ground, csf_terrain
 from skpcd.segmentation.ground._smrf import smrf_fit, smrf_ground
 from skpcd.utils._compile import entry_point
@@ -238,15 +238,7 @@ class GroundFilter(SceneEstimator):
     def _fit(self, xyz):
         n_threads = effective_threads(self.n_jobs)
         if self.method == "csf":
-            ground = csf_ground(
-                xyz,
-                cloth_resolution=self.cell,
-                class_threshold=self.threshold,
-                rigidness=self.rigidness,
-                slope_smooth=self.slope_smooth,
-                iterations=self.iterations,
-                time_step=self.time_step,
-            )
+            ground = csf_ground(xyz, **csf_params(self))
             if self.keep_bases:
                 ground = without_bases(xyz, ground, n_threads)
             terrain = csf_terrain(xyz, ground, self.cell, n_threads)
@@ -333,6 +325,26 @@ class GroundFilter(SceneEstimator):
             True for ground points.
         """
         return self.fit(X).ground_
+
+
+def csf_params(filt):
+    """The keyword arguments of :func:`~skpcd.segmentation.ground._csf.csf_ground`
+    that a CSF :class:`GroundFilter` runs with."""
+    return {
+        "cloth_resolution": filt.cell,
+        "class_threshold": filt.threshold,
+        "rigidness": filt.rigidness,
+        "slope_smooth": filt.slope_smooth,
+        "iterations": filt.iterations,
+        "time_step": filt.time_step,
+    }
+
+
+def bases_filter(threshold=BASE_THRESHOLD):
+    """The SMRF :class:`GroundFilter` of the ``keep_bases`` pass
+    (:func:`~skpcd.segmentation.ground._bases.without_bases`), for
+    :func:`fit_window` on the ground points of a tile."""
+    return GroundFilter(**BASES, threshold=threshold, low_noise=None)
 
 
 def fit_window(filt, xyz, window, n_threads):
