@@ -24,21 +24,27 @@ KERNEL_MODULES = sorted(
 )
 
 
+def _is_borrow(value):
+    return isinstance(value, ast.Call) and getattr(value.func, "id", None) == "borrow"
+
+
 def _borrowed_names(func):
-    """Names bound to ``borrow(...)`` in a function (tuple targets too)."""
+    """Names bound to ``borrow(...)`` in a function (tuple targets too:
+    ``a, b = borrow(a), borrow(b)`` and ``a, b = borrow(a, b)``)."""
     names = set()
     for node in ast.walk(func):
         if not isinstance(node, ast.Assign):
             continue
-        values = node.value.elts if isinstance(node.value, ast.Tuple) else [node.value]
         targets = node.targets[0]
         targets = targets.elts if isinstance(targets, ast.Tuple) else [targets]
+        if _is_borrow(node.value) and len(node.value.args) > 1:
+            values = [node.value] * len(targets)
+        elif isinstance(node.value, ast.Tuple):
+            values = node.value.elts
+        else:
+            values = [node.value]
         for target, value in zip(targets, values):
-            if (
-                isinstance(value, ast.Call)
-                and getattr(value.func, "id", None) == "borrow"
-                and isinstance(target, ast.Name)
-            ):
+            if _is_borrow(value) and isinstance(target, ast.Name):
                 names.add(target.id)
     return names
 
@@ -70,7 +76,12 @@ def _unkept_scratch(func):
             "borrow",
             "keep",
         ):
-            names = {n.id for n in ast.walk(node.args[0]) if isinstance(n, ast.Name)}
+            names = {
+                n.id
+                for arg in node.args
+                for n in ast.walk(arg)
+                if isinstance(n, ast.Name)
+            }
             (kept if node.func.id == "keep" else borrowed_from).update(names)
     return (allocated & borrowed_from) - kept
 
