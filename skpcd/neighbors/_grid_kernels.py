@@ -50,28 +50,36 @@ def _cell_xyz(key, ny, nz):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def borrow_grid(grid):
-    """The arrays of ``grid`` (a VoxelGrid), each borrowed
-    (:func:`~skpcd.utils._numba.borrow`), in the grid's field order. The
-    kernel that calls it holds ``grid`` to its end: the views cannot
-    outlive their owner. Inlined."""
-    return (
-        borrow(grid.xs), borrow(grid.order), borrow(grid.cell_cloud),
-        borrow(grid.cell_key), borrow(grid.cell_start), borrow(grid.cloud_cells),
-        borrow(grid.origin), borrow(grid.h), borrow(grid.dims),
-    )  # fmt: skip
+def sqdist_to(xs, t, qx, qy, qz):
+    """Squared distance from row ``t`` of ``xs`` to ``(qx, qy, qz)`` as the
+    searches compute it (``ex * ex + ey * ey + ez * ez``, ``e = xs[t] - q``,
+    float64 for float64 ``xs``). Inlined (it takes an array)."""
+    ex = xs[t, 0] - qx
+    ey = xs[t, 1] - qy
+    ez = xs[t, 2] - qz
+    return ex * ex + ey * ey + ez * ez
+
+
+@njit(cache=True, nogil=True, inline="always")
+def cloud_of(offsets, i, c):
+    """The cloud of point ``i`` (cloud ``c`` holds the points ``offsets[c]``
+    to ``offsets[c + 1]``): searched forward from ``c``, the cloud of an
+    earlier point, or by bisection when ``c`` is negative. Kernels walking
+    points ``lo`` to ``hi`` start with ``c = -1``. Inlined (an array)."""
+    if c < 0:
+        return np.searchsorted(offsets, i, side="right") - 1
+    while i >= offsets[c + 1]:
+        c += 1
+    return c
 
 
 @njit(cache=True, nogil=True)
 def cell_keys(lo, hi, xyz, offsets, origin, h, dims, base, keys):
     """Key of the cell of points ``lo`` to ``hi`` within their cloud, plus
     ``base[c]`` for cloud ``c`` (empty: nothing added), into ``keys``."""
-    if hi <= lo:
-        return
-    c = np.searchsorted(offsets, lo, side="right") - 1
+    c = -1
     for i in range(lo, hi):
-        while i >= offsets[c + 1]:
-            c += 1
+        c = cloud_of(offsets, i, c)
         ix = _coord(xyz[i, 0], origin[c, 0], h[c], dims[c, 0])
         iy = _coord(xyz[i, 1], origin[c, 1], h[c], dims[c, 1])
         iz = _coord(xyz[i, 2], origin[c, 2], h[c], dims[c, 2])
@@ -167,14 +175,15 @@ def _add_run(cell_key, cell_start, p, c_hi, k_hi, starts, stops, n):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def cell_block(
-    cell, prev, cell_cloud, cell_key, cell_start, cloud_cells, dims, cur, starts, stops
-):
-    """The runs of points of the 27 cells around ``cell``, into
+def cell_block(cell, prev, grid, cur, starts, stops):
+    """The runs of points of the 27 cells around ``cell`` of ``grid`` (a
+    borrowed VoxelGrid, :func:`~skpcd.utils._numba.borrow`), into
     ``starts``/``stops``; returns their number (internal API, also used by
     :mod:`skpcd.segmentation._cluster_kernels`). ``cur`` holds one cursor per
     column, kept when ``cell`` follows ``prev`` in the same cloud (cursors
     then only move forward), otherwise found again by bisection. Inlined."""
+    cell_cloud, cell_key, cell_start = grid.cell_cloud, grid.cell_key, grid.cell_start
+    cloud_cells, dims = grid.cloud_cells, grid.dims
     c = cell_cloud[cell]
     c_lo, c_hi = cloud_cells[c], cloud_cells[c + 1]
     nx, ny, nz = dims[c, 0], dims[c, 1], dims[c, 2]
@@ -216,26 +225,30 @@ def _insert(bd, bi, count, k, d2, j):
         pos = k - 1
     else:
         return count
+    _sift_down(bd, bi, pos, d2, j)
+    return count
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _sift_down(bd, bi, pos, d2, j):
+    """Put (d2, j) at ``pos`` of the buffer sorted by (distance, index)
+    below it, after moving the larger entries up one place: the step of an
+    insertion sort. Inlined (arrays)."""
     while pos > 0 and (bd[pos - 1] > d2 or (bd[pos - 1] == d2 and bi[pos - 1] > j)):
         bd[pos] = bd[pos - 1]
         bi[pos] = bi[pos - 1]
         pos -= 1
     bd[pos] = d2
     bi[pos] = j
-    return count
 
 
 @njit(cache=True, nogil=True)
 def knn_brute(lo, hi, which, cloud, xyz, offsets, indptr, indices, sqdist):
     """k nearest neighbours of the points ``which[lo:hi]`` (of clouds
     ``cloud``) by scanning their whole cloud: for a few isolated points."""
-    which = borrow(which)
-    cloud = borrow(cloud)
-    xyz = borrow(xyz)
-    offsets = borrow(offsets)
-    indptr = borrow(indptr)
-    indices = borrow(indices)
-    sqdist = borrow(sqdist)
+    which, cloud, xyz, offsets, indptr, indices, sqdist = borrow(
+        which, cloud, xyz, offsets, indptr, indices, sqdist
+    )
     k_max = 1
     for p in range(lo, hi):
         i = which[p]
@@ -252,15 +265,11 @@ def knn_brute(lo, hi, which, cloud, xyz, offsets, indptr, indices, sqdist):
         count = 1
         for j in range(offsets[c], offsets[c + 1]):
             if j != i:
-                ex = xyz[j, 0] - xyz[i, 0]
-                ey = xyz[j, 1] - xyz[i, 1]
-                ez = xyz[j, 2] - xyz[i, 2]
-                d2 = ex * ex + ey * ey + ez * ez
+                d2 = sqdist_to(xyz, j, xyz[i, 0], xyz[i, 1], xyz[i, 2])
                 if count < kc or d2 <= bd[kc - 1]:
                     count = _insert(bd, bi, count, kc, d2, j)
         _write_row(indices, sqdist, indptr[i], i, bi, bd, kc)
-    keep(f_own)
-    keep(i_own)
+    keep(f_own, i_own)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -286,15 +295,10 @@ def knn_cells(lo, hi, cells, grid, indptr, max_shell, todo, indices, sqdist, har
     filled. Arrays are borrowed (:func:`~skpcd.utils._numba.borrow`): the
     inlined helpers that take them cost no atomic reference counting.
     """
-    cells = borrow(cells)
-    xs, order, cell_cloud, cell_key, cell_start, cloud_cells, origin, h, dims = (
-        borrow_grid(grid)
+    cells, grid, indptr, todo, indices, sqdist, hard = borrow(
+        cells, grid, indptr, todo, indices, sqdist, hard
     )
-    indptr = borrow(indptr)
-    todo = borrow(todo)
-    indices = borrow(indices)
-    sqdist = borrow(sqdist)
-    hard = borrow(hard)
+    xs, order, cell_cloud, cell_key, cell_start, cloud_cells, origin, h, dims = grid
     k_max = 1
     for p in range(lo, hi):
         cell = cells[p]
@@ -305,26 +309,25 @@ def knn_cells(lo, hi, cells, grid, indptr, max_shell, todo, indices, sqdist, har
     # scratch: the k best, 9 column cursors, the runs of a block and a shell
     f_own = np.empty(k_max)
     i_own = np.empty(k_max + 27 + 2 * n_shell, dtype=np.int64)
-    bd, bi = borrow(f_own), borrow(i_own[:k_max])
-    cur = borrow(i_own[k_max : k_max + 9])
-    block_start = borrow(i_own[k_max + 9 : k_max + 18])
-    block_stop = borrow(i_own[k_max + 18 : k_max + 27])
-    shell_start = borrow(i_own[k_max + 27 : k_max + 27 + n_shell])
-    shell_stop = borrow(i_own[k_max + 27 + n_shell :])
+    bd, bi, cur = borrow(f_own, i_own[:k_max], i_own[k_max : k_max + 9])
+    block_start, block_stop = borrow(
+        i_own[k_max + 9 : k_max + 18], i_own[k_max + 18 : k_max + 27]
+    )
+    shell_start, shell_stop = borrow(
+        i_own[k_max + 27 : k_max + 27 + n_shell], i_own[k_max + 27 + n_shell :]
+    )
     # the block's points side by side (x, y, z, sorted position), shared by
     # the queries of a cell: their distances are computed in SIMD lanes
     cap = 64
     g_own = np.empty((4, cap))
     t_own = np.empty(cap, dtype=np.int64)
-    blk_x, blk_y, blk_z = borrow(g_own[0]), borrow(g_own[1]), borrow(g_own[2])
-    blk_d, blk_t = borrow(g_own[3]), borrow(t_own)
+    blk_x, blk_y, blk_z, blk_d, blk_t = borrow(
+        g_own[0], g_own[1], g_own[2], g_own[3], t_own
+    )
     prev = -1
     for p in range(lo, hi):
         cell = cells[p]
-        n_block = cell_block(
-            cell, prev, cell_cloud, cell_key, cell_start, cloud_cells, dims, cur,
-            block_start, block_stop,
-        )  # fmt: skip
+        n_block = cell_block(cell, prev, grid, cur, block_start, block_stop)
         prev = cell
         n_cand = 0
         for r in range(n_block):
@@ -333,8 +336,9 @@ def knn_cells(lo, hi, cells, grid, indptr, max_shell, todo, indices, sqdist, har
             cap = max(n_cand, 2 * cap)
             g_own = np.empty((4, cap))
             t_own = np.empty(cap, dtype=np.int64)
-            blk_x, blk_y = borrow(g_own[0]), borrow(g_own[1])
-            blk_z, blk_d, blk_t = borrow(g_own[2]), borrow(g_own[3]), borrow(t_own)
+            blk_x, blk_y, blk_z, blk_d, blk_t = borrow(
+                g_own[0], g_own[1], g_own[2], g_own[3], t_own
+            )
         # the cell's own points first, then the rest of the block (its own
         # column first): the nearest come early, fewer insertions follow
         n_cand = 0
@@ -389,10 +393,7 @@ def knn_cells(lo, hi, cells, grid, indptr, max_shell, todo, indices, sqdist, har
             while True:
                 for r in range(n_runs):
                     for t in range(starts[r], stops[r]):
-                        ex = xs[t, 0] - qx
-                        ey = xs[t, 1] - qy
-                        ez = xs[t, 2] - qz
-                        d2 = ex * ex + ey * ey + ez * ez
+                        d2 = sqdist_to(xs, t, qx, qy, qz)
                         if t != t0 and (count < kc or d2 <= bd[kc - 1]):
                             count = _insert(bd, bi, count, kc, d2, order[t])
                 # distance from the query to the space outside the scanned
@@ -469,10 +470,7 @@ def knn_cells(lo, hi, cells, grid, indptr, max_shell, todo, indices, sqdist, har
                 starts, stops = shell_start, shell_stop
             if not hard[i]:
                 _write_row(indices, sqdist, indptr[i], i, bi, bd, kc)
-    keep(f_own)
-    keep(i_own)
-    keep(g_own)
-    keep(t_own)
+    keep(f_own, i_own, g_own, t_own)
 
 
 @njit(cache=True, nogil=True)
@@ -522,31 +520,28 @@ def ball(
     it (:func:`~skpcd.preprocessing._normals_kernels.ball_normals`)."""
     fill = len(indptr) > 0 or with_sink
     sort = sort or with_sink
-    xs, order, cell_cloud, cell_key, cell_start, cloud_cells, _o, _h, dims = (
-        borrow_grid(grid)
+    grid, indptr, counts, indices, sqdist = borrow(
+        grid, indptr, counts, indices, sqdist
     )
-    indptr = borrow(indptr)
-    counts = borrow(counts)
-    indices = borrow(indices)
-    sqdist = borrow(sqdist)
+    xs, order, cell_cloud, cell_start = (
+        grid.xs,
+        grid.order,
+        grid.cell_cloud,
+        grid.cell_start,
+    )
     # scratch for a ball, grown to the points of the 27 cells when needed
     cap = 64
     f_own = np.empty((2, cap))
     b_own = np.empty((2, cap), dtype=np.int64)
-    bd, bi = borrow(f_own[0]), borrow(b_own[0])
-    td, ti = borrow(f_own[1]), borrow(b_own[1])
+    bd, bi, td, ti = borrow(f_own[0], b_own[0], f_own[1], b_own[1])
     k_own = np.zeros(33, dtype=np.int64)
-    nbk = borrow(k_own)
     scale = 32.0 / r2 if r2 > 0.0 else 0.0
     i_own = np.empty(27, dtype=np.int64)
-    cur = borrow(i_own[:9])
-    starts = borrow(i_own[9:18])
-    stops = borrow(i_own[18:])
+    nbk, cur, starts, stops = borrow(k_own, i_own[:9], i_own[9:18], i_own[18:])
     for cell in range(lo, hi):
         n_runs = cell_block(
-            cell, cell - 1 if cell > lo else -1, cell_cloud, cell_key, cell_start,
-            cloud_cells, dims, cur, starts, stops,
-        )  # fmt: skip
+            cell, cell - 1 if cell > lo else -1, grid, cur, starts, stops
+        )
         total = 0
         for r in range(n_runs):
             total += stops[r] - starts[r]
@@ -554,8 +549,7 @@ def ball(
             cap = max(total, 2 * cap)
             f_own = np.empty((2, cap))
             b_own = np.empty((2, cap), dtype=np.int64)
-            bd, bi = borrow(f_own[0]), borrow(b_own[0])
-            td, ti = borrow(f_own[1]), borrow(b_own[1])
+            bd, bi, td, ti = borrow(f_own[0], b_own[0], f_own[1], b_own[1])
         for t0 in range(cell_start[cell], cell_start[cell + 1]):
             i = order[t0]
             row = i if base < 0 else t0 - base
@@ -563,10 +557,7 @@ def ball(
             m = 0
             for r in range(n_runs):
                 for t in range(starts[r], stops[r]):
-                    ex = xs[t, 0] - qx
-                    ey = xs[t, 1] - qy
-                    ez = xs[t, 2] - qz
-                    d2 = ex * ex + ey * ey + ez * ez
+                    d2 = sqdist_to(xs, t, qx, qy, qz)
                     if d2 <= r2:
                         if fill:
                             j = order[t]
@@ -600,23 +591,13 @@ def ball(
                     bd[a] = td[a]
                     bi[a] = ti[a]
             for a in range(1, m):
-                d, j = bd[a], bi[a]
-                b = a
-                while b > 0 and (bd[b - 1] > d or (bd[b - 1] == d and bi[b - 1] > j)):
-                    bd[b] = bd[b - 1]
-                    bi[b] = bi[b - 1]
-                    b -= 1
-                bd[b] = d
-                bi[b] = j
+                _sift_down(bd, bi, a, bd[a], bi[a])
             if with_sink:
                 counts[row] = m
                 sink(sink_args, row, i, cell_cloud[cell], bi, bd, m)
                 continue
             _write_row(indices, sqdist, indptr[row], i, bi, bd, m)
-    keep(f_own)
-    keep(b_own)
-    keep(i_own)
-    keep(k_own)
+    keep(f_own, b_own, i_own, k_own)
 
 
 @njit(cache=True, nogil=True)
@@ -753,10 +734,7 @@ def renumber_rows(lo, hi, order, inv, nb, new_indptr, new_indices, new_sqdist):
 def shift_keys(lo, hi, keys, offsets, base):
     """Subtract ``base[c]`` from the keys ``lo`` to ``hi`` of cloud ``c``
     (cloud ``c`` at ``offsets[c]`` to ``offsets[c + 1]``), in place."""
-    if hi <= lo:
-        return
-    c = np.searchsorted(offsets, lo, side="right") - 1
+    c = -1
     for i in range(lo, hi):
-        while i >= offsets[c + 1]:
-            c += 1
+        c = cloud_of(offsets, i, c)
         keys[i] -= base[c]

@@ -16,7 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
-from skpcd.neighbors._grid_kernels import ball
+from skpcd.neighbors._grid_kernels import ball, cloud_of
 from skpcd.utils._numba import borrow, keep
 
 F0 = np.float32(0.0)
@@ -107,6 +107,14 @@ def eigen33_smallest(c00, c01, c02, c11, c12, c22):
     return lam * scale, vx / best, vy / best, vz / best
 
 
+@njit(cache=True, nogil=True, inline="always")
+def add_products(c00, c01, c02, c11, c12, c22, x, y, z):
+    """The sums of the products ``xx, xy, xz, yy, yz, zz`` with those of
+    ``(x, y, z)`` added, in the type of the arguments: one point's share of
+    a covariance. Inlined."""
+    return c00 + x * x, c01 + x * y, c02 + x * z, c11 + y * y, c12 + y * z, c22 + z * z
+
+
 @njit(cache=True, nogil=True)
 def normals_rows(
     lo, hi, points, indptr, indices, viewpoints, offsets, normals, curvature
@@ -119,13 +127,12 @@ def normals_rows(
     ``curvature`` (n,) are filled in place. Fewer than three neighbours give
     NaN normal and curvature (PCL's rule).
     """
-    points, indptr, indices = borrow(points), borrow(indptr), borrow(indices)
-    viewpoints, offsets = borrow(viewpoints), borrow(offsets)
-    normals, curvature = borrow(normals), borrow(curvature)
-    c = np.searchsorted(offsets, lo, side="right") - 1
+    points, indptr, indices, viewpoints, offsets, normals, curvature = borrow(
+        points, indptr, indices, viewpoints, offsets, normals, curvature
+    )
+    c = -1
     for i in range(lo, hi):
-        while i >= offsets[c + 1]:
-            c += 1
+        c = cloud_of(offsets, i, c)
         vx, vy, vz = viewpoints[c, 0], viewpoints[c, 1], viewpoints[c, 2]
         _normal_row(points, indptr, indices, vx, vy, vz, normals, curvature, i, i)
 
@@ -148,12 +155,7 @@ def _normal_row(points, indptr, indices, vpx, vpy, vpz, normals, curvature, r, i
         x = points[j, 0] - kx
         y = points[j, 1] - ky
         z = points[j, 2] - kz
-        a0 += x * x
-        a1 += x * y
-        a2 += x * z
-        a3 += y * y
-        a4 += y * z
-        a5 += z * z
+        a0, a1, a2, a3, a4, a5 = add_products(a0, a1, a2, a3, a4, a5, x, y, z)
         a6 += x
         a7 += y
         a8 += z
@@ -201,10 +203,7 @@ def ball_normals(
     clouds' local frames, ``viewpoints`` one row per cloud in the same
     frames."""
     ends_own = np.zeros(2, dtype=np.int64)
-    args = (
-        borrow(points), borrow(viewpoints), borrow(normals), borrow(curvature),
-        borrow(ends_own),
-    )  # fmt: skip
+    args = borrow(points, viewpoints, normals, curvature, ends_own)
     none = np.empty(0, dtype=np.int64)
     ball(
         lo, hi, grid, r2, none, counts, none[:0].astype(np.int32),

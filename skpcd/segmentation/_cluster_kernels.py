@@ -15,17 +15,9 @@ nearest core point within ``eps``. Memory is O(n_points).
 import numpy as np
 from numba import njit
 
-from skpcd.neighbors._grid_kernels import borrow_grid, cell_block
+from skpcd.neighbors._grid_kernels import cell_block, sqdist_to
+from skpcd.segmentation._union_find import find_root, union_lower
 from skpcd.utils._numba import borrow, keep
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _find(parent, t):
-    """Root of ``t`` with path halving; inlined (it takes an array)."""
-    while parent[t] != t:
-        parent[t] = parent[parent[t]]
-        t = parent[t]
-    return t
 
 
 @njit(cache=True, nogil=True)
@@ -38,39 +30,7 @@ def union_core(lo, hi, grid, core, r2, parent):
     Threads each need a forest of their own (:func:`merge_forest` joins
     them): the links of a cell may reach any other cell's points.
     """
-    xs, _t, cell_cloud, cell_key, cell_start, cloud_cells, _o, _h, dims = borrow_grid(
-        grid
-    )
-    core = borrow(core)
-    parent = borrow(parent)
-    i_own = np.empty(27, dtype=np.int64)
-    cur = borrow(i_own[:9])
-    starts = borrow(i_own[9:18])
-    stops = borrow(i_own[18:])
-    for cell in range(lo, hi):
-        n_runs = cell_block(
-            cell, cell - 1 if cell > lo else -1, cell_cloud, cell_key, cell_start,
-            cloud_cells, dims, cur, starts, stops,
-        )  # fmt: skip
-        for t0 in range(cell_start[cell], cell_start[cell + 1]):
-            if not core[t0]:
-                continue
-            qx, qy, qz = xs[t0, 0], xs[t0, 1], xs[t0, 2]
-            for r in range(n_runs):
-                for t in range(max(starts[r], t0 + 1), stops[r]):
-                    if not core[t]:
-                        continue
-                    ex = xs[t, 0] - qx
-                    ey = xs[t, 1] - qy
-                    ez = xs[t, 2] - qz
-                    if ex * ex + ey * ey + ez * ez <= r2:
-                        a = _find(parent, t0)
-                        b = _find(parent, t)
-                        if a < b:
-                            parent[b] = a
-                        elif b < a:
-                            parent[a] = b
-    keep(i_own)
+    _visit_cells(lo, hi, grid, core, r2, parent, False)
 
 
 @njit(cache=True, nogil=True)
@@ -78,12 +38,7 @@ def merge_forest(parent, other):
     """Add the links of the forest ``other`` to ``parent`` (lower root kept)."""
     for t in range(len(other)):
         if other[t] != t:
-            a = _find(parent, t)
-            b = _find(parent, _find(other, t))
-            if a < b:
-                parent[b] = a
-            elif b < a:
-                parent[a] = b
+            union_lower(parent, t, find_root(other, t))
 
 
 @njit(cache=True, nogil=True)
@@ -91,39 +46,54 @@ def attach_border(lo, hi, grid, core, r2, nearest):
     """For every non-core point of cells ``lo`` to ``hi``, the position of
     its nearest core point within ``sqrt(r2)`` into ``nearest`` (ties by the
     lower point index), or -1. Rows are independent: safe in threads."""
-    xs, order, cell_cloud, cell_key, cell_start, cloud_cells, _o, _h, dims = (
-        borrow_grid(grid)
-    )
-    core = borrow(core)
-    nearest = borrow(nearest)
+    _visit_cells(lo, hi, grid, core, r2, nearest, True)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _visit_cells(lo, hi, grid, core, r2, out, border):
+    """The walk of :func:`union_core` (``border`` False: each core point
+    linked in the forest ``out``) and :func:`attach_border` (``border``
+    True: each non-core point's nearest core point into ``out``) over the
+    points of cells ``lo`` to ``hi``, each with the runs of the 27 cells
+    around its cell. Inlined: ``border`` is a constant in each kernel."""
+    grid, core, out = borrow(grid, core, out)
+    xs, order, cell_start = grid.xs, grid.order, grid.cell_start
     i_own = np.empty(27, dtype=np.int64)
-    cur = borrow(i_own[:9])
-    starts = borrow(i_own[9:18])
-    stops = borrow(i_own[18:])
+    cur, starts, stops = borrow(i_own[:9], i_own[9:18], i_own[18:])
     for cell in range(lo, hi):
         n_runs = cell_block(
-            cell, cell - 1 if cell > lo else -1, cell_cloud, cell_key, cell_start,
-            cloud_cells, dims, cur, starts, stops,
-        )  # fmt: skip
+            cell, cell - 1 if cell > lo else -1, grid, cur, starts, stops
+        )
         for t0 in range(cell_start[cell], cell_start[cell + 1]):
-            if core[t0]:
+            if core[t0] == border:  # the other kernel's point
                 continue
             qx, qy, qz = xs[t0, 0], xs[t0, 1], xs[t0, 2]
-            best, best_d2, best_i = -1, r2, -1
+            if border:
+                out[t0] = _nearest_core(
+                    xs, order, core, r2, qx, qy, qz, starts, stops, n_runs
+                )
+                continue
             for r in range(n_runs):
-                for t in range(starts[r], stops[r]):
-                    if not core[t]:
-                        continue
-                    ex = xs[t, 0] - qx
-                    ey = xs[t, 1] - qy
-                    ez = xs[t, 2] - qz
-                    d2 = ex * ex + ey * ey + ez * ez
-                    if d2 < best_d2 or (
-                        d2 == best_d2 and (best < 0 or order[t] < best_i)
-                    ):
-                        best, best_d2, best_i = t, d2, order[t]
-            nearest[t0] = best
+                for t in range(max(starts[r], t0 + 1), stops[r]):
+                    if core[t] and sqdist_to(xs, t, qx, qy, qz) <= r2:
+                        union_lower(out, t0, t)
     keep(i_own)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _nearest_core(xs, order, core, r2, qx, qy, qz, starts, stops, n_runs):
+    """Sorted position of the nearest core point within ``sqrt(r2)`` of
+    ``(qx, qy, qz)`` in the ``n_runs`` runs, ties by the lower point index;
+    -1 if none. Inlined (arrays)."""
+    best, best_d2, best_i = -1, r2, -1
+    for r in range(n_runs):
+        for t in range(starts[r], stops[r]):
+            if not core[t]:
+                continue
+            d2 = sqdist_to(xs, t, qx, qy, qz)
+            if d2 < best_d2 or (d2 == best_d2 and (best < 0 or order[t] < best_i)):
+                best, best_d2, best_i = t, d2, order[t]
+    return best
 
 
 @njit(cache=True, nogil=True)
@@ -138,9 +108,9 @@ def component_labels(parent, core, nearest, order, labels):
     root = np.empty(n, dtype=np.int64)
     for t in range(n):
         if core[t]:
-            root[t] = _find(parent, t)
+            root[t] = find_root(parent, t)
         elif nearest[t] >= 0:
-            root[t] = _find(parent, nearest[t])
+            root[t] = find_root(parent, nearest[t])
         else:
             root[t] = -1
     number = np.full(n, -1, dtype=np.int64)

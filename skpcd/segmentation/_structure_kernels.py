@@ -6,6 +6,9 @@ import math
 import numpy as np
 from numba import njit
 
+from skpcd.preprocessing._normals_kernels import add_products
+from skpcd.segmentation._union_find import find_root, union_lower
+
 
 @njit(cache=True, nogil=True)
 def _eigenvalues(a00, a01, a02, a11, a12, a22):
@@ -105,12 +108,9 @@ def local_shape_rows(
             dx = xyz[k, 0] - xyz[i, 0] - mx
             dy = xyz[k, 1] - xyz[i, 1] - my
             dz = xyz[k, 2] - xyz[i, 2] - mz
-            c00 += dx * dx
-            c01 += dx * dy
-            c02 += dx * dz
-            c11 += dy * dy
-            c12 += dy * dz
-            c22 += dz * dz
+            c00, c01, c02, c11, c12, c22 = add_products(
+                c00, c01, c02, c11, c12, c22, dx, dy, dz
+            )
         c00 /= n
         c01 /= n
         c02 /= n
@@ -145,14 +145,6 @@ def neighbour_share(indptr, indices, flag, out):
 
 
 @njit(cache=True, nogil=True)
-def _find(parent, i):
-    while parent[i] != i:
-        parent[i] = parent[parent[i]]
-        i = parent[i]
-    return i
-
-
-@njit(cache=True, nogil=True)
 def aligned_components(indptr, indices, mask, normal, min_cos, labels):
     """Connected components of the masked points over the k-NN graph, an
     edge kept where the two normals are within ``acos(min_cos)`` (either
@@ -174,19 +166,13 @@ def aligned_components(indptr, indices, mask, normal, min_cos, labels):
                 + normal[i, 2] * normal[k, 2]
             )
             if abs(d) >= min_cos:
-                # k as int64, like i: one compiled version of _find
-                a, b = _find(parent, i), _find(parent, np.int64(k))
-                if a != b:
-                    if a < b:
-                        parent[b] = a
-                    else:
-                        parent[a] = b
+                union_lower(parent, i, k)
     count = 0
     for i in range(n):
         labels[i] = -1
     for i in range(n):
         if mask[i]:
-            r = _find(parent, i)
+            r = find_root(parent, i)
             if labels[r] < 0:
                 labels[r] = count
                 count += 1
