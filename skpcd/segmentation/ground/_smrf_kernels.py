@@ -204,36 +204,33 @@ def erode_step(z, square, tmp, out):
     neighbours beyond the edge are skipped (the same as ``scipy.ndimage``'s
     ``mode="nearest"`` for these shapes). A dilation is the erosion of
     ``-z``, negated (both exact)."""
-    ny, nx = z.shape
     if square:
-        for r in range(ny):
-            for c in range(nx):
-                v = z[r, c]
+        _min_pass(z, True, False, tmp)
+        _min_pass(tmp, False, True, out)
+    else:
+        _min_pass(z, True, True, out)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _min_pass(z, along_rows, along_columns, out):
+    """``out``: the minimum of each cell of ``z`` and its neighbours in its
+    row (``along_rows``: left, then right) and in its column
+    (``along_columns``: above, then below), those beyond the edge skipped.
+    Inlined: the flags are constants at each call of :func:`erode_step`."""
+    ny, nx = z.shape
+    for r in range(ny):
+        for c in range(nx):
+            v = z[r, c]
+            if along_rows:
                 if c > 0:
                     v = min(v, z[r, c - 1])
                 if c < nx - 1:
                     v = min(v, z[r, c + 1])
-                tmp[r, c] = v
-        for r in range(ny):
-            for c in range(nx):
-                v = tmp[r, c]
+            if along_columns:
                 if r > 0:
-                    v = min(v, tmp[r - 1, c])
+                    v = min(v, z[r - 1, c])
                 if r < ny - 1:
-                    v = min(v, tmp[r + 1, c])
-                out[r, c] = v
-        return
-    for r in range(ny):
-        for c in range(nx):
-            v = z[r, c]
-            if c > 0:
-                v = min(v, z[r, c - 1])
-            if c < nx - 1:
-                v = min(v, z[r, c + 1])
-            if r > 0:
-                v = min(v, z[r - 1, c])
-            if r < ny - 1:
-                v = min(v, z[r + 1, c])
+                    v = min(v, z[r + 1, c])
             out[r, c] = v
 
 
