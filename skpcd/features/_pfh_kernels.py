@@ -147,11 +147,19 @@ def _bin_theta(fy, fx, n_bins):
         if fy < 0:
             r = -r
         v = n_bins * ((r + math.pi) * D_PI)
-        margin = n_bins * D_PI * 1e-4
         b = math.floor(v)
+        margin = _fast_bins(n_bins)[1]
         if v - b > margin and b + 1.0 - v > margin:
             return int(b)
     return _bin_angle(np.float32(math.atan2(fy, fx)), n_bins)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _fast_bins(n_bins):
+    """``n_bins`` as a float, and the margin in bins (1e-4 rad) within which
+    :func:`_bin_theta` and :func:`_fast_code` leave f1 to ``atan2f``."""
+    nb = np.float64(n_bins)
+    return nb, nb * D_PI * 1e-4
 
 
 @njit(cache=True, nogil=True)
@@ -272,16 +280,41 @@ def _run_end(indptr, i, hi):
 
 @njit(cache=True, nogil=True, inline="always")
 def _lane_scratch(indptr, lo, hi):
-    """The largest neighbourhood of rows ``lo`` to ``hi`` and the scratch of
-    the pairs in SIMD lanes (:func:`pfh_rows`, :func:`spfh_rows`): the
-    gathered lanes, and a code and a flag per pair. Inlined."""
+    """The scratch of the pairs in SIMD lanes of rows ``lo`` to ``hi``
+    (:func:`pfh_rows`, :func:`spfh_rows`): the gathered lanes, a column
+    (position and normal) per point of the largest neighbourhood or per
+    lane, and a code and a flag per pair. Inlined."""
     m_max = 1
     for i in range(lo, hi):
         m_max = max(m_max, indptr[i + 1] - indptr[i])
     q_own = np.empty((min(m_max, ROW_MIN), 6, LANES), dtype=np.float32)
+    p_own = np.empty((6, max(LANES, m_max)), dtype=np.float32)
     code = np.empty(max(LANES, m_max), dtype=np.int64)
     good = np.empty(max(LANES, m_max), dtype=np.bool_)
-    return m_max, q_own, code, good
+    return q_own, p_own, code, good
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _column_codes(P, a, nb, margin, symmetric, code, good):
+    """``code[b], good[b]`` (:func:`_fast_code`) of the pairs of column
+    ``a`` of ``P`` (position and normal of a point in rows 0-5), first in
+    the pair, with the columns ``b < a``: in SIMD lanes. With
+    ``symmetric``, ``good`` is also False where the pair's code depends on
+    which point comes first (:func:`_symmetric`). Inlined: ``symmetric``
+    is a constant at each call."""
+    pax, pay, paz = P[0, a], P[1, a], P[2, a]
+    nax, nay, naz = P[3, a], P[4, a], P[5, a]
+    for b in range(a):
+        code[b], good[b] = _fast_code(
+            pax, pay, paz, nax, nay, naz,
+            P[0, b], P[1, b], P[2, b], P[3, b], P[4, b], P[5, b],
+            nb, margin,
+        )  # fmt: skip
+        if symmetric:
+            good[b] &= _symmetric(
+                pax, pay, paz, nax, nay, naz,
+                P[0, b], P[1, b], P[2, b], P[3, b], P[4, b], P[5, b],
+            )  # fmt: skip
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -296,16 +329,12 @@ def pfh_rows(lo, hi, points, normals, indptr, indices, n_bins, out):
     neighbourhoods and across points in small ones. Layout
     ``(n, n_bins**3)``, f1 fastest.
     """
-    points = borrow(points)
-    normals = borrow(normals)
-    indptr = borrow(indptr)
-    indices = borrow(indices)
-    out = borrow(out)
-    nb = np.float64(n_bins)
-    margin = nb * D_PI * 1e-4
-    m_max, q_own, code, good = _lane_scratch(indptr, lo, hi)
-    Q = borrow(q_own)
-    P = np.empty((6, m_max), dtype=np.float32)
+    points, normals, indptr, indices, out = borrow(
+        points, normals, indptr, indices, out
+    )
+    nb, margin = _fast_bins(n_bins)
+    q_own, p_own, code, good = _lane_scratch(indptr, lo, hi)
+    Q, P = borrow(q_own, p_own)
     i = lo
     while i < hi:
         m = indptr[i + 1] - indptr[i]
@@ -320,19 +349,12 @@ def pfh_rows(lo, hi, points, normals, indptr, indices, n_bins, out):
                     P[d, t] = points[j, d]
                     P[3 + d, t] = normals[j, d]
             for a in range(1, m):
-                pax, pay, paz = P[0, a], P[1, a], P[2, a]
-                nax, nay, naz = P[3, a], P[4, a], P[5, a]
-                for b in range(a):
-                    code[b], good[b] = _fast_code(
-                        pax, pay, paz, nax, nay, naz,
-                        P[0, b], P[1, b], P[2, b], P[3, b], P[4, b], P[5, b],
-                        nb, margin,
-                    )  # fmt: skip
+                _column_codes(P, a, nb, margin, False, code, good)
                 for b in range(a):
                     c = code[b]
                     if not good[b]:
                         c = _exact_code(
-                            pax, pay, paz, nax, nay, naz,
+                            P[0, a], P[1, a], P[2, a], P[3, a], P[4, a], P[5, a],
                             P[0, b], P[1, b], P[2, b], P[3, b], P[4, b], P[5, b],
                             n_bins,
                         )  # fmt: skip
@@ -363,7 +385,7 @@ def pfh_rows(lo, hi, points, normals, indptr, indices, n_bins, out):
                         )  # fmt: skip
                     out[i + lane, c] += incr
         i = e
-    keep(q_own)
+    keep(q_own, p_own)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -380,16 +402,12 @@ def spfh_rows(lo, hi, points, normals, indptr, indices, n_bins, counts):
     with the point's own index are skipped. Pairs run in SIMD lanes as in
     :func:`pfh_rows`.
     """
-    points = borrow(points)
-    normals = borrow(normals)
-    indptr = borrow(indptr)
-    indices = borrow(indices)
-    counts = borrow(counts)
-    nb = np.float64(n_bins)
-    margin = nb * D_PI * 1e-4
-    _, q_own, code, good = _lane_scratch(indptr, lo, hi)
-    Q = borrow(q_own)
-    A = np.empty((6, LANES), dtype=np.float32)
+    points, normals, indptr, indices, counts = borrow(
+        points, normals, indptr, indices, counts
+    )
+    nb, margin = _fast_bins(n_bins)
+    q_own, a_own, code, good = _lane_scratch(indptr, lo, hi)
+    Q, A = borrow(q_own, a_own)
     # each code's three columns (bytes, and what to add there), looked up:
     # integer division is slow
     packed = counts.shape[1] < 3 * n_bins
@@ -469,7 +487,7 @@ def spfh_rows(lo, hi, points, normals, indptr, indices, n_bins, counts):
                 counts[k, col[c, 1]] += inc[c, 1]
                 counts[k, col[c, 2]] += inc[c, 2]
         i = e
-    keep(q_own)
+    keep(q_own, a_own)
 
 
 def increment_sums(max_pairs):
@@ -510,10 +528,7 @@ def _spfh_value(table, n_pairs, c):
 @njit(cache=True, nogil=True)
 def spfh_values(lo, hi, counts, indptr, table, out):
     """Rows ``lo`` to ``hi`` of the SPFH as PCL's float32 values."""
-    counts = borrow(counts)
-    indptr = borrow(indptr)
-    table = borrow(table)
-    out = borrow(out)
+    counts, indptr, table, out = borrow(counts, indptr, table, out)
     for i in range(lo, hi):
         n_pairs = indptr[i + 1] - indptr[i] - 1
         for b in range(counts.shape[1]):
@@ -539,6 +554,17 @@ def _count(counts, j, b, packed):
     return np.int64(counts[j, b])
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _add_bins(out, o, b, n_bins, v1, v2, v3, s1, s2, s3):
+    """Add ``v1, v2, v3`` to bin ``b`` of the three blocks of row ``o`` of
+    ``out`` and return the blocks' sums ``s1, s2, s3`` with them added
+    (:func:`fpfh_rows`). Inlined (an array)."""
+    out[o, b] += v1
+    out[o, n_bins + b] += v2
+    out[o, 2 * n_bins + b] += v3
+    return s1 + v1, s2 + v2, s3 + v3
+
+
 @njit(cache=True, nogil=True)
 def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, rows, out):
     """FPFH of points ``lo`` to ``hi`` into the zeroed rows of ``out``.
@@ -551,13 +577,9 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, rows
     float64 (``out`` float64), k counting the neighbours at a non-zero
     distance, not rescaled. Point ``i``'s row is ``rows[i]`` (empty: ``i``).
     """
-    points = borrow(points)
-    counts = borrow(counts)
-    indptr = borrow(indptr)
-    indices = borrow(indices)
-    table = borrow(table)
-    rows = borrow(rows)
-    out = borrow(out)
+    points, counts, indptr, indices, table, rows, out = borrow(
+        points, counts, indptr, indices, table, rows, out
+    )
     width = 3 * n_bins
     n_table = len(table)
     # 4-bit counts, two per byte (see spfh_rows), or one count per element
@@ -592,12 +614,7 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, rows
                     v1 = table[n_pairs, c1] * weight
                     v2 = table[n_pairs, c2] * weight
                     v3 = table[n_pairs, c3] * weight
-                    s1 += v1
-                    s2 += v2
-                    s3 += v3
-                    out[o, b] += v1
-                    out[o, b2] += v2
-                    out[o, b3] += v3
+                    s1, s2, s3 = _add_bins(out, o, b, n_bins, v1, v2, v3, s1, s2, s3)
                 continue
             if n_pairs < n_table:
                 # the three blocks side by side: three independent sums, each
@@ -607,12 +624,7 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, rows
                     v1 = table[n_pairs, counts[j, b]] * weight
                     v2 = table[n_pairs, counts[j, n_bins + b]] * weight
                     v3 = table[n_pairs, counts[j, 2 * n_bins + b]] * weight
-                    s1 += v1
-                    s2 += v2
-                    s3 += v3
-                    out[o, b] += v1
-                    out[o, n_bins + b] += v2
-                    out[o, 2 * n_bins + b] += v3
+                    s1, s2, s3 = _add_bins(out, o, b, n_bins, v1, v2, v3, s1, s2, s3)
                 continue
             for b in range(n_bins):
                 v1 = _spfh_value(table, n_pairs, _count(counts, j, b, packed)) * weight
@@ -626,12 +638,7 @@ def fpfh_rows(lo, hi, points, counts, indptr, indices, table, n_bins, mode, rows
                     )
                     * weight
                 )
-                s1 += v1
-                s2 += v2
-                s3 += v3
-                out[o, b] += v1
-                out[o, n_bins + b] += v2
-                out[o, 2 * n_bins + b] += v3
+                s1, s2, s3 = _add_bins(out, o, b, n_bins, v1, v2, v3, s1, s2, s3)
         n_own = indptr[i + 1] - indptr[i] - 1
         if mode == 2:
             for b in range(width):
@@ -741,32 +748,23 @@ def pfh_rows_reuse(
     """
     if hi <= lo:
         return
-    rows = borrow(rows)
-    point_of = borrow(point_of)
-    pos = borrow(pos)
-    xs = borrow(xs)
-    inv = borrow(inv)
-    points = borrow(points)
-    normals = borrow(normals)
-    indptr = borrow(indptr)
-    indices = borrow(indices)
-    out = borrow(out)
-    nb = np.float64(n_bins)
-    margin = nb * D_PI * 1e-4
+    rows, point_of, pos, xs, inv = borrow(rows, point_of, pos, xs, inv)
+    points, normals, indptr, indices, out = borrow(
+        points, normals, indptr, indices, out
+    )
+    nb, margin = _fast_bins(n_bins)
     m_max = 1
     for r in range(lo, hi):
         li = rows[r]
         m_max = max(m_max, indptr[li + 1] - indptr[li])
     c_own = np.empty((2, m_max, m_max), dtype=np.int16)
     i_own = np.empty((5, m_max), dtype=np.int64)
-    prev_pts = borrow(i_own[0])  # the previous neighbourhood's points
-    perm = borrow(i_own[1])  # new order: position u holds entry perm[u]
-    old = borrow(i_own[2])  # entry u's position in the previous matrix
-    code = borrow(i_own[3])
+    # the previous neighbourhood's points; the new order (position u holds
+    # entry perm[u]); entry u's position in the previous matrix
+    prev_pts, perm, old, code = borrow(i_own[0], i_own[1], i_own[2], i_own[3])
     good_own = np.empty(m_max, dtype=np.bool_)
-    good = borrow(good_own)
     p_own = np.empty((6, m_max), dtype=np.float32)
-    P = borrow(p_own)
+    good, P = borrow(good_own, p_own)
     n_prev = 0
     cur = 0
     for r in range(lo, hi):
@@ -810,18 +808,7 @@ def pfh_rows_reuse(
                 out[i, c] += incr
         # pairs with a new point: in SIMD lanes
         for u in range(max(n_old, 1), m):
-            pax, pay, paz = P[0, u], P[1, u], P[2, u]
-            nax, nay, naz = P[3, u], P[4, u], P[5, u]
-            for v in range(u):
-                code[v], good[v] = _fast_code(
-                    pax, pay, paz, nax, nay, naz,
-                    P[0, v], P[1, v], P[2, v], P[3, v], P[4, v], P[5, v],
-                    nb, margin,
-                )  # fmt: skip
-                good[v] &= _symmetric(
-                    pax, pay, paz, nax, nay, naz,
-                    P[0, v], P[1, v], P[2, v], P[3, v], P[4, v], P[5, v],
-                )  # fmt: skip
+            _column_codes(P, u, nb, margin, True, code, good)
             for v in range(u):
                 if good[v]:
                     c = code[v]
@@ -843,7 +830,4 @@ def pfh_rows_reuse(
         cur = 1 - cur
     for t in range(n_prev):
         pos[prev_pts[t]] = -1
-    keep(c_own)
-    keep(i_own)
-    keep(good_own)
-    keep(p_own)
+    keep(c_own, i_own, good_own, p_own)
