@@ -20,6 +20,7 @@ from skpcd.exceptions import MissingFileError, NonFiniteWarning, PointCloudFileE
 from skpcd.io._api import SUPPORTED_EXTENSIONS, read_point_cloud, write_point_cloud
 from skpcd.io._atomic import atomic_path
 from skpcd.io._common import check_chunk_size, take_rows
+from skpcd.io._copc import COPC_USER_ID
 from skpcd.io._las_reader import checked_chunks, open_checked, read_vlr_records
 from skpcd.io._las_structure import decoding, import_laspy
 from skpcd.io._las_writer import write as write_las
@@ -210,6 +211,12 @@ def _is_ours(vlr):
     )
 
 
+def _is_copc(vlr):
+    """A COPC record (info, hierarchy, extents): it describes the octree
+    order of the source's points, which a copy does not keep."""
+    return vlr.user_id == COPC_USER_ID
+
+
 def _new_dims(laspy, score_name, has_ground):
     params = [
         laspy.ExtraBytesParams(
@@ -310,11 +317,11 @@ def _stream_las(source, output, arrays, class_names, score_name, keep_fields, ch
             if drop:
                 header.remove_extra_dims(drop)
             header.add_extra_dims(_new_dims(laspy, score_name, has_ground))
-            vlrs = [v for v in header.vlrs if not _is_ours(v)]
+            vlrs = [v for v in header.vlrs if not (_is_ours(v) or _is_copc(v))]
             header.vlrs = vlrs + _class_vlrs(
                 laspy, class_names, score_name, has_ground, existing=header.vlrs
             )
-            evlrs = header.evlrs
+            evlrs = [v for v in header.evlrs or () if not _is_copc(v)]
             names = reader.header.point_format.dtype().names
             kept = [n for n in names if n not in drop]
         n_classes = len(class_names)
@@ -459,7 +466,9 @@ def write_labelled_scan(
     per-point arrays (pass :class:`numpy.memmap` arrays; they are read a
     chunk at a time). Every point, every standard and extra-bytes dimension
     (bit for bit), the header's scales, offsets and other fields, and every
-    VLR and EVLR of the source are kept. Then:
+    VLR and EVLR of the source are kept, but for the records of a COPC
+    source's octree (user id ``copc``: the copy is a plain LAZ file, its
+    points are not in octree order). Then:
 
     - ``classification`` is set to 2 (ASPRS ground) where ``ground`` is True,
       unchanged elsewhere (its flag bits too);

@@ -127,6 +127,9 @@ class _Layout(typing.NamedTuple):
     vlrs: list  # (user_id, record_id, data offset, data length)
     evlrs: list
     laz_backend: object  # None: laspy's choice
+    # (points, bytes) of each LAZ chunk in file order, from lazrs's reading
+    # of the chunk table (None for LAS, or without lazrs)
+    chunks: object = None
 
 
 def _text(raw):
@@ -286,8 +289,8 @@ def _check_points(path, layout):
         chunk_size, items = _check_laszip(path, layout, record)
         if n == 0:
             return layout
-        backend = _check_chunks(path, layout, f, record, chunk_size, items)
-    return layout._replace(laz_backend=backend)
+        backend, chunks = _check_chunks(path, layout, f, record, chunk_size, items)
+    return layout._replace(laz_backend=backend, chunks=chunks)
 
 
 def _check_laszip(path, layout, record):
@@ -343,7 +346,8 @@ def _check_laszip(path, layout, record):
 
 def _check_chunks(path, layout, f, record, chunk_size, items):
     """Check the chunk table (and the chunk headers of layered LAZ) against
-    the file; returns the laspy backend to decode with."""
+    the file; returns the laspy backend to decode with and the chunk table
+    (None without lazrs)."""
     laspy = import_laspy()
     n, data, size = layout.n_points, layout.offset, layout.size
     first = data + 8  # the chunks follow the offset of the chunk table
@@ -384,7 +388,7 @@ def _check_chunks(path, layout, f, record, chunk_size, items):
     try:
         import lazrs
     except ImportError:
-        return None  # laspy reports the missing backend
+        return None, None  # laspy reports the missing backend
     f.seek(data)
     with decoding(path):
         chunks = lazrs.read_chunk_table(f, lazrs.LazVlr(record))
@@ -422,7 +426,7 @@ def _check_chunks(path, layout, f, record, chunk_size, items):
         and chunk_size * layout.record_length <= _PARALLEL_CHUNK_BYTES
     )
     backend = laspy.LazBackend.LazrsParallel if parallel else laspy.LazBackend.Lazrs
-    return backend if backend.is_available() else None
+    return (backend if backend.is_available() else None), chunks
 
 
 def _chunk_header(f, layout, start, head):

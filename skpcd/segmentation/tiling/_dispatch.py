@@ -4,8 +4,9 @@
 this process or as the tasks of a joblib backend (threads, processes, a
 Dask cluster), one tile per running task in flight. Tasks that see this
 machine's files (:func:`shares_files`: joblib's own backends, a Dask
-cluster whose workers all have an address here) read their tile from its
-spill file themselves; others get the prepared tile shipped.
+cluster whose workers all have an address here) read their tile
+themselves, from its spill file or from the COPC file the scene is read
+from; others get the prepared tile shipped.
 """
 
 import collections
@@ -17,7 +18,6 @@ import numpy as np
 from joblib import cpu_count, effective_n_jobs
 from sklearn.utils.parallel import Parallel, delayed
 
-from skpcd.segmentation.tiling._spill import load_tile
 from skpcd.utils._memory import heap_for_arrays, release_free_memory
 from skpcd.utils._parallel import (
     chosen_backend,
@@ -41,11 +41,12 @@ __all__ = ["map_tiles", "shares_files"]
 
 
 class _TileRef(typing.NamedTuple):
-    """A tile for a task to read itself: its spill file, the scene's token
-    (file, content) that proves the task sees this machine's files, and
-    the scene's ground flags file (None when the pass does not need it)."""
+    """A tile for a task to read itself: its reader (the spill file, or the
+    nodes of a COPC file), the scene's token (file, content) that proves
+    the task sees this machine's files, and the scene's ground flags file
+    (None when the pass does not need it)."""
 
-    path: str
+    reader: typing.Any
     token: tuple
     ground: str | None
 
@@ -57,7 +58,7 @@ def _read_ref(ref):
         with open(ref.token[0], encoding="ascii") as f:
             if f.read() != ref.token[1]:
                 return None
-        xyz, index = load_tile(ref.path)
+        xyz, index = ref.reader.load()
         ground = None
         if ref.ground is not None:
             ground = np.asarray(np.load(ref.ground, mmap_mode="r")[index])
@@ -178,7 +179,7 @@ def map_tiles(scene, tiles, prepare, pargs, compute, cargs, n_jobs, ground=None)
     def jobs():
         for t in tiles:
             if shared[0]:
-                tile = _TileRef(str(scene.path(t)), token, flags_path)
+                tile = _TileRef(scene.tile_reader(t), token, flags_path)
                 job = (tile, t, prepare, pargs, compute, cargs)
                 pending.append((t, None))
             else:

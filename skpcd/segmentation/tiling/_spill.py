@@ -5,8 +5,10 @@ A scan larger than memory is read chunk by chunk
 tiles whose buffered square it falls in (:class:`TileGrid`), by appending it
 to one temporary file per tile. A tile can then be loaded on its own, with
 its buffer, and processed; memory is bounded by the largest buffered tile,
-not by the scan. The per-tile results go to memory-mapped arrays
-(:func:`result_array`, :func:`detach`).
+not by the scan (the scene and its tile files: :mod:`._scene`). A COPC
+file is not spilled: its tiles are read from its octree (:mod:`._octree`).
+The per-tile results go to memory-mapped arrays (:func:`result_array`,
+:func:`detach`).
 """
 
 import os
@@ -19,11 +21,15 @@ import numpy as np
 from skpcd.io._api import read_point_cloud
 from skpcd.io._chunks import file_bounds, is_path, is_streamed, iter_file_chunks
 from skpcd.io._common import check_chunk_size
+from skpcd.io._copc import is_copc
 from skpcd.segmentation.tiling._geometry import TileGrid
+from skpcd.segmentation.tiling._octree import octree_scene
+from skpcd.segmentation.tiling._scene import RECORD, SpillTile, TiledScene, load_tile
 from skpcd.utils._geometry import point_bounds
 from skpcd.utils._validation import check_scene
 
 __all__ = [
+    "SpillTile",
     "TiledScene",
     "detach",
     "iter_chunks",
@@ -32,10 +38,6 @@ __all__ = [
     "scene_bounds",
     "tile_scene",
 ]
-
-# One record per (point, buffered tile): coordinates and the point's index in
-# the scan.
-_RECORD = np.dtype([("xyz", np.float64, (3,)), ("index", np.int64)])
 
 
 def iter_chunks(source, chunk_size, *, fields=None):
@@ -69,85 +71,6 @@ def scene_bounds(source, chunk_size):
     return lo, hi
 
 
-class TiledScene:
-    """A scene spilled to disk, one temporary file per buffered tile.
-
-    Made by :func:`tile_scene`; use it as a context manager (or call
-    :meth:`close`) to delete the files.
-
-    Attributes
-    ----------
-    grid : TileGrid
-        The tiles.
-    folder : pathlib.Path
-        The temporary folder holding the tile files.
-    n_points : int
-        Points in the scene.
-    mins, maxs : ndarray of shape (3,)
-        Exact bounds of the points (computed while routing).
-    counts : ndarray of shape (n_tiles,), dtype int64
-        Points in each buffered tile.
-    """
-
-    def __init__(self, grid, folder, n_points, mins, maxs, counts, owned):
-        self.grid = grid
-        self.folder = Path(folder)
-        self.n_points = int(n_points)
-        self.mins = mins
-        self.maxs = maxs
-        self.counts = counts
-        self._owned = owned
-
-    def owned_counts(self):
-        """Points owned by each tile (its core square); they sum to ``n_points``.
-
-        Returns
-        -------
-        counts : ndarray of shape (n_tiles,), dtype int64
-            Owned points per tile.
-        """
-        return self._owned.copy()
-
-    def path(self, tile):
-        """The file of a tile (it may not exist when the tile is empty)."""
-        return self.folder / f"tile_{int(tile)}.bin"
-
-    def load(self, tile):
-        """The points of a buffered tile, in scan order.
-
-        Parameters
-        ----------
-        tile : int
-            Tile index.
-
-        Returns
-        -------
-        xyz : ndarray of shape (n_tile_points, 3), dtype float64
-            Points in the buffered tile.
-        index : ndarray of shape (n_tile_points,), dtype int64
-            Their indices in the scan, ascending.
-        """
-        return load_tile(self.path(tile))
-
-    def close(self):
-        """Delete the temporary files."""
-        shutil.rmtree(self.folder, ignore_errors=True)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
-
-def load_tile(path):
-    """``(xyz, index)`` of a tile file (empty arrays when it does not exist)."""
-    if not os.path.exists(path):
-        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
-    records = np.fromfile(path, dtype=_RECORD)
-    return np.ascontiguousarray(records["xyz"]), records["index"].copy()
-
-
 def tile_scene(
     source,
     tile_size,
@@ -162,7 +85,11 @@ def tile_scene(
     The scene is read chunk by chunk (a LAS/LAZ file through
     :func:`skpcd.io.iter_points`; other files are read whole) and every
     point is appended to the file of each buffered tile holding it, so
-    memory holds one chunk at a time.
+    memory holds one chunk at a time. A COPC file (a LAZ file with a COPC
+    info VLR) is not spilled: its tiles are read from its octree, by their
+    bounds, each time they are loaded (after one pass over the x, y and z of
+    the points that counts them); they hold the same points, in the same
+    order.
 
     Parameters
     ----------
@@ -199,6 +126,8 @@ def tile_scene(
     True True
     """
     chunk_size = check_chunk_size(chunk_size)
+    if _bounds is None and is_path(source) and is_copc(source):
+        return octree_scene(source, tile_size, buffer=buffer, temp_folder=temp_folder)
     mins, maxs = scene_bounds(source, chunk_size) if _bounds is None else _bounds
     if not np.all(mins <= maxs):
         raise ValueError("the scene has no points")
@@ -218,7 +147,7 @@ def tile_scene(
             lo, hi = np.minimum(lo, lo_c), np.maximum(hi, hi_c)
             owned += np.bincount(grid.owner(xyz), minlength=grid.n_tiles)
             rows, tiles = grid.route(xyz)
-            records = np.empty(len(rows), dtype=_RECORD)
+            records = np.empty(len(rows), dtype=RECORD)
             records["xyz"] = xyz[rows]
             records["index"] = rows + start
             bounds = np.flatnonzero(np.diff(tiles)) + 1
