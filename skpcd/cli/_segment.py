@@ -21,16 +21,21 @@ from skpcd.cli._common import (
     side_file,
     unique_counts,
 )
-from skpcd.io._segment_folder import SEGMENT_FORMATS
 
 KINDS = ("object", "facade", "wire")
+# The choices of --ground and --format, written out (as GROUND_PRESETS of
+# skpcd.segmentation.ground and SEGMENT_FORMATS of skpcd.io._segment_folder
+# have them, tests/cli/test_startup.py checks) so that building the parser
+# loads no library: ``skpcd --help`` imports neither scikit-learn nor numba.
+GROUND_CHOICES = ("auto", "street", "csf", "aerial", "mobile", "none")
+SEGMENT_FORMATS = ("ply", "pcd", "las", "laz", "xyz", "txt", "csv", "npy")
 
 
 def add_segmentation_options(p):
     """The options of :func:`skpcd.segmentation.segment_scene`."""
     p.add_argument(
         "--ground",
-        choices=("auto", "street", "csf", "aerial", "mobile", "none"),
+        choices=GROUND_CHOICES,
         default="auto",
         help="ground removal preset (GroundFilter): auto, chosen from what the "
         "scan is (aerial for an airborne tile, street for the others; said on "
