@@ -134,21 +134,8 @@ class OctreeScene(TiledScene):
         rows = self.index.nodes_in(*held_square(self.grid, tile, self.grid.buffer))
         return OctreeTile(self.index.subset(rows), self.grid, int(tile))
 
-    def load(self, tile):
-        """The points of a buffered tile, in file order, read from the octree.
-
-        Parameters
-        ----------
-        tile : int
-            Tile index.
-
-        Returns
-        -------
-        xyz : ndarray of shape (n_tile_points, 3), dtype float64
-            Points in the buffered tile.
-        index : ndarray of shape (n_tile_points,), dtype int64
-            Their indices in the file, ascending.
-        """
+    def _load(self, tile):
+        """The tile read from the octree, nodes decoded for earlier tiles reused."""
         return self.tile_reader(tile).load(self._cache)
 
     def close(self):

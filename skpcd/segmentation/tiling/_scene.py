@@ -69,7 +69,8 @@ class TiledScene:
         return SpillTile(str(self.path(tile)))
 
     def load(self, tile):
-        """The points of a buffered tile, in scan order.
+        """The points of a buffered tile, in scan order (file order for a
+        file; for a COPC file, read from its octree).
 
         Parameters
         ----------
@@ -83,6 +84,10 @@ class TiledScene:
         index : ndarray of shape (n_tile_points,), dtype int64
             Their indices in the scan, ascending.
         """
+        return self._load(tile)
+
+    def _load(self, tile):
+        """The tile read from its spill file."""
         return load_tile(self.path(tile))
 
     def close(self):
