@@ -57,7 +57,7 @@ def add_segmentation_options(p):
         dest="structures",
         action="store_false",
         help="cluster every non-ground point alike: no facade and wire segments, "
-        "no splitting of clusters at vertical trunks (needed with --tile-size)",
+        "no splitting of clusters at vertical trunks",
     )
     p.add_argument(
         "--method",
@@ -94,7 +94,9 @@ def add_segmentation_options(p):
         default=None,
         help="process the scene in square tiles of this side (metres), streaming "
         "LAS/LAZ input, so that memory is bounded by the tile, not the scene; "
-        "same segments as without",
+        "same ground and segments as without, except with the structures step "
+        "(facades, wires, trunk splitting), whose segments agree up to a "
+        "bound (see the user guide)",
     )
     p.add_argument(
         "--tile-buffer",

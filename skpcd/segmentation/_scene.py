@@ -421,25 +421,26 @@ def _segment_in_tiles(points, ground, sensor, structures, tiling, clustering):
     filt = _ground_filter(ground, clustering["n_jobs"])
     if filt is not None:
         filt._validate_params()
+    params = None
     if structures is not False:
-        raise ValueError(
-            "structures (facades, wires, trunk splitting) are found from "
-            "pieces of any size: tile by tile they would not give the "
-            "in-memory result. With tile_size pass structures=False, or "
-            "segment in memory"
-        )
+        params = {
+            **STRUCTURE_DEFAULTS,
+            **(structures if isinstance(structures, dict) else {}),
+        }
     eps = clustering["eps"]
-    labels, is_ground, used = segment_tiled(
+    labels, is_ground, used, kinds = segment_tiled(
         points,
         tile_size=float(tile_size),
         tile_buffer=tile_buffer,
         ground=filt,
+        structures=params,
         **{**clustering, "eps": None if eps is None else float(eps)},
         temp_folder=temp,
     )
-    return _with_kinds(labels, is_ground, used)._replace(
-        scan=scan, ground_filter=ground if isinstance(ground, str) else None
-    )
+    return SceneSegmentation(
+        labels, is_ground, used, _kind_names(kinds), scan,
+        ground if isinstance(ground, str) else None,
+    )  # fmt: skip
 
 
 def _inliers(xyz, denoise, n_jobs):

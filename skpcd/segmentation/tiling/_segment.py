@@ -24,6 +24,7 @@ from skpcd.segmentation._dbscan import (
     fit_knee,
     sample_queries,
 )
+from skpcd.segmentation._structures import segment_structures
 from skpcd.segmentation.ground._bases import BASE_THRESHOLD
 from skpcd.segmentation.ground._cloth import StreamedCloth
 from skpcd.segmentation.ground._filter import bases_filter, csf_params, fit_window
@@ -217,6 +218,166 @@ def chunked_nanmedian(values, mask, chunk_size):
     return float(np.mean(middle))
 
 
+def _stitch(tiled, labels, chunk_size, size_range, exact):
+    """Join the segments of the tiles and number them as untiled.
+
+    ``tiled`` yields ``((index, owned), (own_labels, shared, shared_labels,
+    kinds))`` per tile: the scan indices of the tile's points and which it
+    owns, the tile's labels of its own points, the positions (among its
+    points) of the points it shares with the tiles that own them and its
+    labels of those, and the kind of each of its segments (None: objects).
+    Owned points get their tile's labels in ``labels``; two segments with a
+    shared point are one. With ``exact`` (DBSCAN), every shared point is
+    labelled by its owner too (the buffer rule); otherwise a shared point
+    its owner leaves out links nothing. Segments outside ``size_range``
+    are dropped; the others are numbered in the order of their first
+    point. Returns the kind of each segment: that of the tile's segment
+    holding most of its points."""
+    n = len(labels)
+    n_local, links, local_kinds, local_owned, tile_sizes = 0, [], [], [], []
+    for (index, owned), (own_labels, shared, shared_labels, kinds) in tiled:
+        labels[index[owned]] = np.where(own_labels >= 0, own_labels + n_local, -1)
+        links.append(np.column_stack([index[shared], shared_labels + n_local]))
+        n_top = max(int(own_labels.max(initial=-1)), int(shared_labels.max(initial=-1)))
+        if kinds is not None:
+            n_top = max(n_top, len(kinds) - 1)
+        local_kinds.append(
+            np.zeros(n_top + 1, np.int8) if kinds is None else kinds[: n_top + 1]
+        )
+        local_owned.append(
+            np.bincount(own_labels[own_labels >= 0], minlength=n_top + 1)
+        )
+        n_local += n_top + 1
+        tile_sizes.append(n_top + 1)
+    # union of the segments through their shared points
+    links = np.concatenate(links) if links else np.zeros((0, 2), np.int64)
+    other = labels[links[:, 0]] if len(links) else np.zeros(0, np.int64)
+    if exact and np.any(other < 0):  # pragma: no cover - the buffer rule forbids it
+        raise RuntimeError("a shared core point is not core in its own tile")
+    links, other = links[other >= 0], other[other >= 0]
+    if not exact and len(links):
+        links, other = _mutual(links[:, 1], other, np.cumsum(tile_sizes))
+    graph = coo_matrix(
+        (np.ones(len(links)), (links[:, 1], other)), shape=(n_local, n_local)
+    )
+    _, component = connected_components(graph, directed=False)
+    # sizes and first point of each segment, then the size range and the
+    # numbering of the untiled run (order of the first point)
+    n_comp = int(component.max(initial=-1)) + 1
+    sizes = np.zeros(n_comp, dtype=np.int64)
+    first = np.full(n_comp, n, dtype=np.int64)
+    for start in range(0, n, chunk_size):
+        part = labels[start : start + chunk_size]
+        comp = component[part[part >= 0]]
+        sizes += np.bincount(comp, minlength=n_comp)
+        pos = np.flatnonzero(part >= 0) + start
+        np.minimum.at(first, comp, pos)
+    min_size, max_size = size_range
+    keep = sizes >= min_size
+    if max_size is not None:
+        keep &= sizes <= max_size
+    number = np.full(n_comp, -1, dtype=np.int64)
+    kept = np.flatnonzero(keep)
+    number[kept[np.argsort(first[kept], kind="stable")]] = np.arange(len(kept))
+    final = np.append(number[component], -1)  # index -1: no cluster
+    for start in range(0, n, chunk_size):
+        part = labels[start : start + chunk_size]
+        part[:] = final[part]
+    # the kind of each segment: its largest part's (owned points)
+    local_kinds = np.concatenate(local_kinds) if local_kinds else np.zeros(0, np.int8)
+    owned = np.concatenate(local_owned) if local_owned else np.zeros(0, np.int64)
+    order = np.lexsort((-owned, component))
+    head = order[np.r_[True, component[order][1:] != component[order][:-1]]]
+    comp_kind = np.zeros(n_comp, dtype=np.int8)
+    comp_kind[component[head]] = local_kinds[head]
+    return comp_kind[kept[np.argsort(first[kept], kind="stable")]]
+
+
+def _mutual(mine, theirs, tile_ends):
+    """The links ``(point, segment)`` of the tiles' segments ``mine`` to
+    their owners' segments ``theirs`` (one row per shared point) kept where
+    the two segments hold the most of each other's shared points in that
+    tile: a segment one tile sees whole and another tile splits (or the
+    other way round) is joined to one part, not used to join the parts.
+    Returns ``(links, other)`` as :func:`_stitch` uses them, one row per
+    kept pair."""
+    pairs, count = np.unique(
+        np.column_stack([mine, theirs]), axis=0, return_counts=True
+    )
+    tile = np.searchsorted(tile_ends, pairs[:, 0], side="right")
+    # for each of mine, the owner segment holding most of its shared points
+    order = np.lexsort((-count, pairs[:, 0]))
+    best_mine = order[np.r_[True, pairs[order, 0][1:] != pairs[order, 0][:-1]]]
+    # for each owner segment in each tile, the tile's segment holding most
+    key = np.column_stack([tile, pairs[:, 1]])
+    order = np.lexsort((-count, key[:, 1], key[:, 0]))
+    k = key[order]
+    best_theirs = order[np.r_[True, np.any(k[1:] != k[:-1], axis=1)]]
+    keep = np.intersect1d(best_mine, best_theirs)
+    return np.column_stack([np.zeros(len(keep), np.int64), pairs[keep, 0]]), pairs[
+        keep, 1
+    ]
+
+
+# The structures step on tiles: each tile segments its points within
+# structures_reach(eps) of its core square (facades and wires are found
+# from pieces at least 4 m long, trunks from 1.2 m columns), and links its
+# segments to those of the owners of its points within structures_link(eps)
+# of its core square, where its view is nearly whole.
+_STRUCTURES_REACH = 10.0
+
+
+def structures_reach(eps):
+    """Around each tile, the points the structures step sees (metres)."""
+    return max(_STRUCTURES_REACH, 8 * eps)
+
+
+def structures_link(eps):
+    """Around each tile, the shared points that link its segments."""
+    return structures_reach(eps) / 2
+
+
+def _structures_prepare(xyz, index, ground, tile, grid, reach, link):
+    """All the points of a buffered tile within ``reach`` of its core
+    square, their ground flags, which it owns and which lie within
+    ``link`` of its core square."""
+    owned = grid.owner(xyz) == tile
+    x0, y0, x1, y1 = grid.core_bounds(tile)
+    x, y = xyz[:, 0], xyz[:, 1]
+
+    def within(d):
+        return (x >= x0 - d) & (x <= x1 + d) & (y >= y0 - d) & (y <= y1 + d)
+
+    sel = within(reach) | owned
+    args = (np.ascontiguousarray(xyz[sel]), ground[sel], owned[sel], within(link)[sel])
+    return args, (index[sel], owned[sel])
+
+
+def _structures_tile(xyz, ground, owned, near, eps, min_samples, params, n_threads):
+    """The structures step (facades, wires, objects split at trunks) on a
+    tile's points: labels of its own points, the positions and labels of
+    the labelled points it shares near its core square, and the kind of
+    each of its segments."""
+    rest = np.flatnonzero(~ground)
+    labels = np.full(len(xyz), -1, dtype=np.int64)
+    kinds = np.zeros(0, dtype=np.int8)
+    if len(rest) >= 2:
+        pts = np.ascontiguousarray(xyz[rest])
+
+        def cluster(mask):
+            if mask.sum() < 2:
+                return np.full(int(mask.sum()), -1, dtype=np.int64)
+            sub = np.ascontiguousarray(pts[mask])
+            return grid_dbscan(sub, eps, min_samples, n_jobs=n_threads)[0]
+
+        sub, kinds, _ = segment_structures(
+            pts, xyz[ground], eps, params, cluster, n_jobs=n_threads
+        )
+        labels[rest] = sub
+    shared = np.flatnonzero(near & ~owned & (labels >= 0))
+    return labels[owned], shared, labels[shared], kinds
+
+
 def _cluster_prepare(xyz, index, ground, tile, grid, reach):
     """The non-ground points of a buffered tile within ``reach`` of its core
     square (and its own points); their scan indices and which are its own."""
@@ -237,7 +398,7 @@ def _cluster_tile(xyz, owned, eps, min_samples, n_threads):
     owned points, and the positions and labels of the other core points."""
     labels, core = grid_dbscan(xyz, eps, min_samples, n_jobs=n_threads)
     shared = np.flatnonzero(core & ~owned)
-    return labels[owned], shared, labels[shared]
+    return labels[owned], shared, labels[shared], None
 
 
 def _eps_prepare(xyz, index, ground, tile, grid, queries):
@@ -377,6 +538,7 @@ def segment_tiled(
     tile_size,
     tile_buffer,
     ground,
+    structures=None,
     method,
     eps,
     min_samples,
@@ -390,10 +552,12 @@ def segment_tiled(
 ):
     """The tiled path of :func:`~skpcd.segmentation.segment_scene`.
 
-    ``ground`` is a GroundFilter (the preset resolved) or None; the other
-    arguments are those of ``segment_scene``, validated. Returns
-    ``(labels, ground, eps)`` as memory-mapped arrays (file already
-    unlinked on POSIX systems).
+    ``ground`` is a GroundFilter (the preset resolved) or None;
+    ``structures`` None or the parameters of the structures step (the
+    defaults merged); the other arguments are those of ``segment_scene``,
+    validated. Returns ``(labels, ground, eps, kinds)``: the first two as
+    memory-mapped arrays (file already unlinked on POSIX systems), the
+    kind of each segment (an index of ``KINDS``).
     """
     chunk_size = check_chunk_size(chunk_size)
     if method == "euclidean":
@@ -409,12 +573,19 @@ def segment_tiled(
         need = [reach + margin]
         if eps is not None:
             need.append(2 * eps)
-        elif windowed is None:
+            if structures is not None:
+                need.append(structures_reach(eps))
+        elif windowed is None or structures is not None:
             need.append(0.25 * tile_size)
         buffer = 1.01 * max(need) + 1e-6
     else:
         buffer = float(tile_buffer)
     ground_buffer = max(0.0, min(reach, buffer - margin))
+    if eps is not None and structures is not None and structures_reach(eps) > buffer:
+        raise ValueError(
+            f"tile_buffer={buffer:g} is too small for the structures step: it "
+            f"needs at least {structures_reach(eps):g} around each tile"
+        )
     if eps is not None and 2 * eps > buffer:
         raise ValueError(
             f"tile_buffer={buffer:g} is too small for eps={eps:g}: the stitching "
@@ -467,57 +638,37 @@ def segment_tiled(
                 )
 
         # 3. clusters: each tile's DBSCAN on its non-ground points within
-        # 2 * eps of its core square; owned points keep its labels, core
-        # points shared with another tile link the two tiles' clusters
+        # 2 * eps of its core square (with structures: its segmentation of
+        # all its points within STRUCTURES_REACH); owned points keep its
+        # labels, points shared with another tile link the two tiles'
+        # segments
+        kinds = np.zeros(0, dtype=np.int8)
         if eps > 0:
-            reach_c = 2 * eps * (1 + 1e-9) + 1e-9
-            n_local, links = 0, []
-            for (index, owned), (own_labels, shared, shared_labels) in map_tiles(
-                scene, tiles, _cluster_prepare, (grid, reach_c), _cluster_tile,
-                (eps, min_samples), n_jobs, ground=ground_flags,
-            ):  # fmt: skip
-                labels[index[owned]] = np.where(
-                    own_labels >= 0, own_labels + n_local, -1
-                )
-                links.append(np.column_stack([index[shared], shared_labels + n_local]))
-                n_top = max(
-                    int(own_labels.max(initial=-1)), int(shared_labels.max(initial=-1))
-                )
-                n_local += n_top + 1
-            # union of the clusters through their shared core points
-            links = np.concatenate(links) if links else np.zeros((0, 2), np.int64)
-            other = labels[links[:, 0]] if len(links) else np.zeros(0, np.int64)
-            if np.any(other < 0):  # pragma: no cover - the buffer rule forbids it
-                raise RuntimeError("a shared core point is not core in its own tile")
-            graph = coo_matrix(
-                (np.ones(len(links)), (links[:, 1], other)), shape=(n_local, n_local)
+            if structures is None:
+                reach_c = 2 * eps * (1 + 1e-9) + 1e-9
+                tiled = map_tiles(
+                    scene, tiles, _cluster_prepare, (grid, reach_c), _cluster_tile,
+                    (eps, min_samples), n_jobs, ground=ground_flags,
+                )  # fmt: skip
+            else:
+                tiled = map_tiles(
+                    scene, tiles, _structures_prepare,
+                    (grid, structures_reach(eps), structures_link(eps)),
+                    _structures_tile, (eps, min_samples, structures), n_jobs,
+                    ground=ground_flags,
+                )  # fmt: skip
+            kinds = _stitch(
+                tiled,
+                labels,
+                chunk_size,
+                (min_cluster_size, max_cluster_size),
+                exact=structures is None,
             )
-            _, component = connected_components(graph, directed=False)
-            # sizes and first point of each segment, then the size range and
-            # the numbering of the untiled run (order of the first point)
-            n_comp = int(component.max(initial=-1)) + 1
-            sizes = np.zeros(n_comp, dtype=np.int64)
-            first = np.full(n_comp, n, dtype=np.int64)
-            for start in range(0, n, chunk_size):
-                part = labels[start : start + chunk_size]
-                comp = component[part[part >= 0]]
-                sizes += np.bincount(comp, minlength=n_comp)
-                pos = np.flatnonzero(part >= 0) + start
-                np.minimum.at(first, comp, pos)
-            keep = sizes >= min_cluster_size
-            if max_cluster_size is not None:
-                keep &= sizes <= max_cluster_size
-            number = np.full(n_comp, -1, dtype=np.int64)
-            kept = np.flatnonzero(keep)
-            number[kept[np.argsort(first[kept], kind="stable")]] = np.arange(len(kept))
-            final = np.append(number[component], -1)  # index -1: no cluster
-            for start in range(0, n, chunk_size):
-                part = labels[start : start + chunk_size]
-                part[:] = final[part]
         result = (
             detach(labels, out / "labels.npy"),
             detach(is_ground, out / "ground.npy"),
             float(eps),
+            kinds,
         )
     finally:
         scene.close()
