@@ -27,13 +27,18 @@ from ``os.wait4``; the small driver's own peak, recorded, is its floor).
 The scan: the first n points (scan order: a shorter street) of the
 full-density 150 m mobile scan of ``bench_ground.py`` (``BIG``), which
 ``bench_street_segmentation.py`` times its stages on, written as LAS by
-skpcd; it has 9,759,047 points, so the "10 M" row is that many. Four jobs:
+skpcd; it has 9,759,047 points, so the "10 M" row is that many. The "50 M"
+row is the first 50 M points of a 775 m street simulated the same way. Five
+jobs:
 
 - ``skpcd``: ``python -m skpcd segment SCAN -o FOLDER`` with the defaults
   (CSF, structures, DBSCAN with automatic eps, segments of 50 points or
   more, one PLY file per segment plus ``segments.csv``; all cores);
 - ``skpcd --no-structures``: the same without facades, wires and trunk
   splitting: ground and DBSCAN, the job of the references;
+- ``skpcd --tile-size 100``: the defaults on 100 m tiles (the scan spilled
+  to temporary files and segmented tile by tile: memory bounded by the
+  tile);
 - ``csf+sklearn``: laspy reads the file; the ``CSF`` package with the
   parameters of ``GROUND_PRESETS["csf"]`` (1 m cloth, rigidness 3, slope
   smoothing, 0.3 m threshold, 500 iterations, time step 0.65; its own
@@ -77,11 +82,22 @@ sys.path.insert(0, str(HERE))
 
 PIPELINES = ("default", "baseline25")
 DATASETS = ("dales", "street")
-TOOLS = ("skpcd", "skpcd --no-structures", "csf+sklearn", "csf+open3d")
-SKPCD = {"skpcd": [], "skpcd --no-structures": ["--no-structures"]}
+TOOLS = (
+    "skpcd",
+    "skpcd --no-structures",
+    "skpcd --tile-size 100",
+    "csf+sklearn",
+    "csf+open3d",
+)
+SKPCD = {
+    "skpcd": [],
+    "skpcd --no-structures": ["--no-structures"],
+    "skpcd --tile-size 100": ["--tile-size", "100"],
+}
 STREET_OBJECTS = ("mobile", 40, 0)  # scanner, per class, seed (as in identification)
 MIN_SAMPLES = 5  # skpcd's default, used by the references
 WARM_SIZE = 0.1  # millions of points of the scan that warms the numba cache
+LONG_STREET = 775.0  # metres of the street of the scans beyond 9.76 M points
 
 
 def log(*a):
@@ -207,7 +223,9 @@ def identify(repeat, quick):
 
 def make_scans(folder, sizes):
     """The LAS files of the first n points of the big mobile scan (subprocess:
-    keeps the driver's peak RSS, the floor of every child's, small)."""
+    keeps the driver's peak RSS, the floor of every child's, small); a size
+    beyond its 9.76 M points is the first n points of a longer street
+    simulated the same way (775 m: about 50 M points)."""
     import numpy as np
     from bench_ground import BIG, big_kw
 
@@ -217,14 +235,20 @@ def make_scans(folder, sizes):
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     todo = [s for s in sizes if not (folder / f"scan_{s:g}M.las").exists()]
-    if not todo:
-        return
-    log("simulating the big street scan...")
-    points = make_street_scene(BIG["length"], scanner="mobile", **big_kw()).points
-    for s in todo:
-        n = min(int(s * 1_000_000), len(points))
-        write_point_cloud(folder / f"scan_{s:g}M.las", np.ascontiguousarray(points[:n]))
-        log(f"scan_{s:g}M.las: {n} points")
+    for length in (BIG["length"], LONG_STREET):
+        # BIG holds 9,759,047 points (the "10 M" scan); the longer street the
+        # larger sizes
+        mine = [s for s in todo if (s <= 10) == (length == BIG["length"])]
+        if not mine:
+            continue
+        log(f"simulating a {length:g} m street scan...")
+        points = make_street_scene(length, scanner="mobile", **big_kw()).points
+        for s in mine:
+            n = min(int(s * 1_000_000), len(points))
+            scan = folder / f"scan_{s:g}M.las"
+            write_point_cloud(scan, np.ascontiguousarray(points[:n]))
+            log(f"{scan.name}: {n} points")
+        del points
 
 
 def reference_worker(tool, scan, out, eps):

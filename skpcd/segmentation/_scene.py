@@ -206,10 +206,13 @@ def segment_scene(
         differ near tile borders): the reach of the SMRF filter,
         ``(3 * ceil(window / cell) + 11) * cell`` plus two cells, 1 % more
         (67.7 m for ``"aerial"``, 36.9 m for ``"mobile"``; for ``"street"``
-        that of its bases pass; CSF needs none), and at least ``2 * eps``;
-        with ``eps=None`` and no SMRF, a quarter of the tile. Tiles should
-        be several times larger than their buffer, or the overlap dominates
-        the work.
+        that of its bases pass, 12.6 m; CSF needs none), at least ``2 *
+        eps``, and with ``structures`` at least ``max(10, 8 * eps)`` metres
+        (the points the structures step sees around a tile; with
+        ``eps=None``, 10 m, and a ValueError if the estimated eps needs
+        more); with ``eps=None``, no SMRF and no structures, a quarter of
+        the tile. Tiles should be several times larger than their buffer,
+        or the overlap dominates the work.
     temp_folder : str or path-like, default=None
         Where the tile files and the result arrays are spilled with
         ``tile_size`` (the system's temporary folder when None); it needs

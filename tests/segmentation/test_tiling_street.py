@@ -20,7 +20,7 @@ from skpcd.segmentation import GROUND_PRESETS, GroundFilter, TileGrid
 from skpcd.segmentation import segment_scene as _segment_scene
 from skpcd.segmentation.ground._filter import fit_window
 from skpcd.segmentation.ground._smrf import reach_cells
-from skpcd.segmentation.tiling._segment import chunked_nanmedian
+from skpcd.segmentation.tiling._segment import chunked_nanmedian, default_buffer
 
 
 def segment_scene(*args, **kwargs):
@@ -258,6 +258,22 @@ def test_tiled_structures_near_untiled(street, real_sweeps, tmp_path):
         kinds = set(untiled.kinds) | set(tiled.kinds)
         assert kinds <= {"object", "facade", "wire"}
         assert abs(tiled.n_segments - untiled.n_segments) <= 2
+
+
+def test_default_buffers_as_documented():
+    # the figures of segment_scene's tile_buffer docstring
+    def preset(name):
+        return GroundFilter(**GROUND_PRESETS[name])
+
+    assert round(default_buffer(100, preset("aerial"), None, None), 1) == 67.7
+    assert round(default_buffer(100, preset("mobile"), None, None), 1) == 36.9
+    assert round(default_buffer(100, preset("street"), None, None), 1) == 12.6
+    assert default_buffer(100, preset("csf"), 0.5, None) == pytest.approx(1.01 + 1e-6)
+    street, params = preset("street"), {"n_neighbors": 12}
+    assert round(default_buffer(100, street, None, params), 1) == 12.6
+    assert round(default_buffer(100, preset("csf"), None, params), 1) == 10.1
+    assert round(default_buffer(100, preset("csf"), 2.0, params), 1) == 16.2
+    assert default_buffer(100, None, None, None) == pytest.approx(25.25 + 1e-6)
 
 
 @pytest.mark.parametrize("n", [0, 1, 2, 5, 6, 1001])

@@ -218,6 +218,33 @@ def chunked_nanmedian(values, mask, chunk_size):
     return float(np.mean(middle))
 
 
+def windowed_filter(ground):
+    """The filter the tiles run on windows of the scene's raster: SMRF, or
+    with CSF (one cloth for the whole scan) the second filter of
+    ``keep_bases``; None when there is none."""
+    if ground is not None and ground.method == "csf":
+        return bases_filter() if ground.keep_bases else None
+    return ground
+
+
+def default_buffer(tile_size, ground, eps, structures):
+    """The smallest tile buffer that keeps the tiled result the in-memory
+    one (see ``tile_buffer`` in :func:`~skpcd.segmentation.segment_scene`)."""
+    windowed = windowed_filter(ground)
+    need = [0.0]
+    if windowed is not None:
+        need.append(ground_reach(windowed) + 2 * float(windowed.cell))
+    if eps is not None:
+        need.append(2 * eps)
+        if structures is not None:
+            need.append(structures_reach(eps))
+    elif structures is not None:
+        need.append(_STRUCTURES_REACH)  # checked once eps is estimated
+    elif windowed is None:
+        need.append(0.25 * tile_size)
+    return 1.01 * max(need) + 1e-6
+
+
 def _stitch(tiled, labels, chunk_size, size_range, exact):
     """Join the segments of the tiles and number them as untiled.
 
@@ -562,22 +589,11 @@ def segment_tiled(
     chunk_size = check_chunk_size(chunk_size)
     if method == "euclidean":
         eps, min_samples = (EUCLIDEAN_EPS if eps is None else float(eps)), 1
-    # the filter run on windows of the scene's raster: SMRF, or with CSF
-    # (one cloth for the whole scan) the second filter of keep_bases
-    windowed = ground
-    if ground is not None and ground.method == "csf":
-        windowed = bases_filter() if ground.keep_bases else None
+    windowed = windowed_filter(ground)
     reach = 0.0 if windowed is None else ground_reach(windowed)
     margin = 0.0 if windowed is None else 2 * float(windowed.cell)
     if tile_buffer is None:
-        need = [reach + margin]
-        if eps is not None:
-            need.append(2 * eps)
-            if structures is not None:
-                need.append(structures_reach(eps))
-        elif windowed is None or structures is not None:
-            need.append(0.25 * tile_size)
-        buffer = 1.01 * max(need) + 1e-6
+        buffer = default_buffer(tile_size, ground, eps, structures)
     else:
         buffer = float(tile_buffer)
     ground_buffer = max(0.0, min(reach, buffer - margin))
@@ -630,11 +646,12 @@ def segment_tiled(
                 scene, tiles, ground_flags, min_samples, eps_scale,
                 random_state, n_jobs, chunk_size,
             )  # fmt: skip
-            if 2 * eps > buffer:
+            least = 2 * eps if structures is None else structures_reach(eps)
+            if least > buffer:
                 raise ValueError(
                     f"the estimated eps={eps:g} needs a tile buffer of at least "
-                    f"2 * eps = {2 * eps:g}, more than tile_buffer={buffer:g}; "
-                    "pass a larger tile_buffer or give eps"
+                    f"{least:g}, more than tile_buffer={buffer:g}; pass a larger "
+                    "tile_buffer or give eps"
                 )
 
         # 3. clusters: each tile's DBSCAN on its non-ground points within
