@@ -23,6 +23,13 @@ from numba import njit
 __all__ = ["classify_points", "sample_points"]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _shifted(xyz, p, shift, g):
+    """Point ``p`` in the frame CSF simulates its group ``g`` in (shifted
+    to the group's lowest corner, as csf_ground shifts it)."""
+    return xyz[p, 0] - shift[g, 0], xyz[p, 1] - shift[g, 1], xyz[p, 2] - shift[g, 2]
+
+
 @njit(cache=True, nogil=True)
 def sample_points(
     xyz, index, group, shift, res, zmin, z_start, z_width, z_height,
@@ -42,9 +49,7 @@ def sample_points(
         g = group[p]
         if g < 0:
             continue
-        x = xyz[p, 0] - shift[g, 0]
-        y = xyz[p, 1] - shift[g, 1]
-        z = xyz[p, 2] - shift[g, 2]
+        x, y, z = _shifted(xyz, p, shift, g)
         i = index[p]
         nx, ny = z_width[g], z_height[g]
         c = min(max(math.floor(x / res), 0), nx - 1)
@@ -92,9 +97,8 @@ def classify_points(xyz, group, shift, res, threshold, cloth, c_start, c_width, 
             continue
         if g < 0:
             continue
-        x = xyz[p, 0] - shift[g, 0]
-        y = xyz[p, 1] - shift[g, 1]
-        up = -(xyz[p, 2] - shift[g, 2])
+        x, y, z = _shifted(xyz, p, shift, g)
+        up = -z
         dx = x - origin
         dz = y - origin
         c0 = int(dx / res)
