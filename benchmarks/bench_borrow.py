@@ -34,16 +34,11 @@ DEFAULT_DATA = str(ROOT.parents[1] / "shared" / "data" / "dales_objects")
 
 
 def _no_borrow():
-    """Replace ``borrow`` by the identity before the kernels are imported."""
-    from numba import njit
-
+    """Replace ``borrow`` by ``counted`` (the same arrays, reference counts
+    kept) before the kernels are imported."""
     import skpcd.utils._numba as nb
 
-    @njit(inline="always")
-    def identity(arr):
-        return arr
-
-    nb.borrow = identity
+    nb.borrow = nb.counted
 
 
 def worker(spec):
