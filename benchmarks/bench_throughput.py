@@ -27,8 +27,9 @@ from ``os.wait4``; the small driver's own peak, recorded, is its floor).
 The scan: the first n points (scan order: a shorter street) of the
 full-density 150 m mobile scan of ``bench_ground.py`` (``BIG``), which
 ``bench_street_segmentation.py`` times its stages on, written as LAS by
-skpcd; it has 9,759,047 points, so the "10 M" row is that many. The "50 M"
-row is the first 50 M points of a 775 m street simulated the same way. Five
+skpcd (9,759,047 points with the simulator of the first rows; 10 M or more
+since, so the "10 M" row is 10 M points from 2026-12-03 on). The "50 M" row
+is the first 50 M points of a 775 m street simulated the same way. Five
 jobs:
 
 - ``skpcd``: ``python -m skpcd segment SCAN -o FOLDER`` with the defaults
