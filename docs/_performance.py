@@ -320,16 +320,19 @@ def _street_segmentation(data):
 
 
 def _throughput_segment(data):
-    rows = [
-        [
-            num(r["points"], 0),
-            Text(r["tool"]),
-            num(r["seconds"], 1),
-            num(r["peak_mb"], 0),
-        ]
-        for r in data["segment"]["best"]
-    ]
-    header = ["points", "job", "seconds", "peak MiB"]
+    rows = []
+    for r in data["segment"]["best"]:
+        failed = r.get("error") is not None
+        rows.append(
+            [
+                num(r["size"], 0, 1e6) if failed else num(r["points"], 0),
+                Text(r["tool"]),
+                num(r["seconds"], 1),
+                num(r["peak_mb"], 0),
+                Text("failed (memory cap)" if failed else "done"),
+            ]
+        )
+    header = ["points", "job", "seconds", "peak MiB", "result"]
     return header, rows, _throughput_provenance(data, "segment")
 
 
