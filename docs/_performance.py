@@ -325,7 +325,7 @@ def _throughput_segment(data):
         failed = r.get("error") is not None
         rows.append(
             [
-                num(r["size"], 0, 1e6) if failed else num(r["points"], 0),
+                Text(f"{r['size']:g} M") if failed else num(r["points"], 0),
                 Text(r["tool"]),
                 num(r["seconds"], 1),
                 num(r["peak_mb"], 0),
