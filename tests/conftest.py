@@ -136,3 +136,27 @@ def dales_cases(labelled_objects):
     clouds = _subsample([clouds[i] for i in keep])
     X = make_case_based_pipeline()[0].fit_transform(clouds)
     return X, labels[keep], clouds
+
+
+@pytest.fixture(scope="module")
+def dask_client():
+    """A LocalCluster of 2 worker processes of 1 thread, started for the
+    module that asks for it (skipped without the dask extra)."""
+    pytest.importorskip(
+        "distributed", reason="the dask extra is not installed: pip install skpcd[dask]"
+    )
+    from distributed import Client, LocalCluster
+
+    cluster = LocalCluster(
+        n_workers=2,
+        processes=True,
+        threads_per_worker=1,
+        dashboard_address=":0",
+        memory_limit=None,
+    )
+    client = Client(cluster)
+    try:
+        yield client
+    finally:
+        client.close()
+        cluster.close()

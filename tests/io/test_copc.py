@@ -186,29 +186,6 @@ def test_tasks_read_their_tile_from_the_copc_file(monkeypatch):
     assert np.array_equal(tiled.labels, local.labels)
 
 
-@pytest.fixture(scope="module")
-def dask_client():
-    """A LocalCluster of 2 worker processes of 1 thread, started here."""
-    pytest.importorskip(
-        "distributed", reason="the dask extra is not installed: pip install skpcd[dask]"
-    )
-    from distributed import Client, LocalCluster
-
-    cluster = LocalCluster(
-        n_workers=2,
-        processes=True,
-        threads_per_worker=1,
-        dashboard_address=":0",
-        memory_limit=None,
-    )
-    client = Client(cluster)
-    try:
-        yield client
-    finally:
-        client.close()
-        cluster.close()
-
-
 @pytest.mark.parametrize("where", ["shared", "shipped"])
 def test_dask_cluster_gives_the_local_result(dask_client, where, monkeypatch):
     from distributed import get_task_stream

@@ -322,29 +322,6 @@ def test_loky_runs_in_process():
 # --- a real Dask cluster ---------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def dask_client():
-    """A LocalCluster of 2 worker processes of 1 thread, started here."""
-    pytest.importorskip(
-        "distributed", reason="the dask extra is not installed: pip install skpcd[dask]"
-    )
-    from distributed import Client, LocalCluster
-
-    cluster = LocalCluster(
-        n_workers=2,
-        processes=True,
-        threads_per_worker=1,
-        dashboard_address=":0",
-        memory_limit=None,
-    )
-    client = Client(cluster)
-    try:
-        yield client
-    finally:
-        client.close()
-        cluster.close()
-
-
 def _run_on_dask(client, call):
     """The call's result and the workers that ran its batches."""
     from distributed import get_task_stream
