@@ -27,7 +27,6 @@ Usage::
 import argparse
 import compileall
 import datetime
-import json
 import os
 import re
 import subprocess
@@ -35,6 +34,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from measure import write_results
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -186,9 +187,7 @@ def main():
     text = report(results)
     print(text, end="")
     if args.out:
-        out = Path(args.out)
-        out.write_text(json.dumps(results, indent=1) + "\n")
-        out.with_suffix(".txt").write_text(text)
+        write_results(args.out, results, text)
 
 
 if __name__ == "__main__":

@@ -39,7 +39,6 @@ end is recorded; ratios measured in one round are what to quote.
 """
 
 import argparse
-import json
 import os
 import re
 import resource
@@ -53,7 +52,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
-from measure import loadavg, provenance  # noqa: E402
+from measure import loadavg, provenance, write_results  # noqa: E402
 
 SCANS = Path(
     os.environ.get("SKPCD_REAL_MOBILE", HERE.parents[1] / "shared/data/real_mobile")
@@ -293,9 +292,7 @@ def main():
     text = report(results)
     print(text, end="")
     if args.out:
-        out = Path(args.out)
-        out.write_text(json.dumps(results, indent=1) + "\n")
-        out.with_suffix(".txt").write_text(text)
+        write_results(args.out, results, text)
 
 
 if __name__ == "__main__":

@@ -26,6 +26,7 @@ __all__ = [
     "provenance",
     "reset_peak",
     "rss_now_mb",
+    "write_results",
 ]
 
 
@@ -144,3 +145,19 @@ def provenance():
         "machine": machine(),
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
     }
+
+
+def write_results(out, results, text):
+    """Write ``results`` as JSON to ``out`` and ``text`` beside it (``.txt``),
+    each through a temporary file renamed when whole, so that an interrupted
+    run leaves the previous results, not half a file."""
+    import json
+
+    out = Path(out)
+    for path, content in (
+        (out, json.dumps(results, indent=1) + "\n"),
+        (out.with_suffix(".txt"), text),
+    ):
+        tmp = path.with_name(f".{path.name}.part")
+        tmp.write_text(content)
+        os.replace(tmp, path)
