@@ -103,19 +103,22 @@ def test_csf_fills_the_empty_parts_of_the_bounding_box():
     assert len(_far_fill(shifted[:3000], 1.0)) == 0
 
 
-def test_tiles_refuse_csf_and_structures():
-    X = np.random.default_rng(0).random((100, 3))
-    with pytest.raises(ValueError, match="cloth simulation"):
-        segment_scene(X, ground="csf", tile_size=10.0, structures=False)
-    # ground="auto" takes SMRF tile by tile
-    assert segment_scene(X, tile_size=10.0, structures=False).ground_filter in (
-        "aerial",
-        "mobile",
-    )
-    with pytest.raises(ValueError, match="structures=False"):
-        segment_scene(X, ground="aerial", tile_size=10.0)
+def test_tiles_take_csf_and_structures():
+    # the tiled path runs the in-memory defaults (CSF through one cloth for
+    # the whole scan, the structures step): test_tiling_street.py compares
+    # the answers; here, the options are accepted and chosen alike
+    X = np.random.default_rng(0).random((100, 3)) * [30.0, 30.0, 0.1]
+    tiled = segment_scene(X, ground="csf", tile_size=10.0, structures=False)
+    whole = segment_scene(X, ground="csf", structures=False)
+    assert np.array_equal(tiled.ground, whole.ground)
+    auto = segment_scene(X, tile_size=10.0, structures=False).ground_filter
+    assert auto == segment_scene(X, structures=False).ground_filter
+    seg = segment_scene(X, ground="aerial", tile_size=10.0)
+    assert len(seg.kinds) == seg.n_segments
     with pytest.raises(ValueError, match="unknown structures"):
         segment_scene(X, structures={"wire_height": 5.0})
+    with pytest.raises(ValueError, match="denoise"):
+        segment_scene(X, tile_size=10.0, denoise="radius")
 
 
 def test_local_shape_equals_numpy():
