@@ -30,23 +30,18 @@ __all__ = [
 ]
 
 
+def _git(*args):
+    """The output of a git command run in this checkout."""
+    return subprocess.run(
+        ["git", *args], capture_output=True, text=True, cwd=HERE, check=True
+    ).stdout.strip()
+
+
 def commit():
     """The checkout's short commit, marked when it has uncommitted changes."""
     try:
-        out = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            capture_output=True,
-            text=True,
-            cwd=HERE,
-            check=True,
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
-            capture_output=True,
-            text=True,
-            cwd=HERE,
-            check=True,
-        ).stdout.strip()
+        out = _git("rev-parse", "--short", "HEAD")
+        dirty = _git("status", "--porcelain", "--untracked-files=no")
         return out + (" (with uncommitted changes)" if dirty else "")
     except (OSError, subprocess.CalledProcessError):
         return "unknown"

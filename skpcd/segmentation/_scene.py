@@ -216,7 +216,8 @@ def segment_scene(
     temp_folder : str or path-like, default=None
         Where the tile files and the result arrays are spilled with
         ``tile_size`` (the system's temporary folder when None); it needs
-        about 32 bytes per point and buffered tile, plus 9 bytes per point.
+        about 32 bytes per point and buffered tile, plus 9 bytes per point
+        (18 with the bases pass of ``"street"``).
     denoise : {"statistical", "radius"}, outlier filter or None, default=None
         Outlier removal before everything else:
         :class:`~skpcd.preprocessing.StatisticalOutlierFilter` or
@@ -324,12 +325,15 @@ def segment_scene(
        of their first point) after the size range is applied over the whole
        scan.
 
-    Memory holds one buffered tile and its DBSCAN, plus the result arrays,
-    9 bytes per point, which are memory-mapped files (unlinked once
-    mapped on POSIX systems). The result is the untiled one whatever the
+    Memory holds one buffered tile and its segmentation, plus the result
+    arrays, 9 bytes per point (18 with the bases pass of ``"street"``),
+    which are memory-mapped files (unlinked once mapped on POSIX systems).
+    Without the structures step the result is the untiled one whatever the
     tile size, for both methods, a given or an estimated eps and any
     ground filter (the tests compare them on a street scan whose bounding
-    box is mostly empty, with objects across tile borders).
+    box is mostly empty, with objects across tile borders, and on real
+    sweeps); with it, the segments agree up to a bound (see the user
+    guide's "Scanning a city").
 
     Examples
     --------
