@@ -108,22 +108,25 @@ def _compress_kernel(src, dst, table):
     ip = 0
     op = 1  # dst[0] is kept for the control byte of the first literal run
     lit = 0
-    while ip < n - 2:
-        h = _hash3(src, ip)
-        ref = table[h]
-        table[h] = ip
-        off = ip - ref - 1
-        if (
-            ref >= 0
-            and off < 8192
-            and src[ref] == src[ip]
-            and src[ref + 1] == src[ip + 1]
-            and src[ref + 2] == src[ip + 2]
-        ):
-            max_len = min(n - ip, 264)
-            length = 3
-            while length < max_len and src[ref + length] == src[ip + length]:
-                length += 1
+    while ip < n:
+        length = off = 0
+        if ip < n - 2:  # a back-reference needs three bytes
+            h = _hash3(src, ip)
+            ref = table[h]
+            table[h] = ip
+            off = ip - ref - 1
+            if (
+                ref >= 0
+                and off < 8192
+                and src[ref] == src[ip]
+                and src[ref + 1] == src[ip + 1]
+                and src[ref + 2] == src[ip + 2]
+            ):
+                max_len = min(n - ip, 264)
+                length = 3
+                while length < max_len and src[ref + length] == src[ip + length]:
+                    length += 1
+        if length:
             # Close the pending literal run, or drop its unused control byte.
             if lit:
                 dst[op - lit - 1] = lit - 1
@@ -155,15 +158,6 @@ def _compress_kernel(src, dst, table):
                 dst[op - lit - 1] = lit - 1
                 lit = 0
                 op += 1
-    while ip < n:
-        dst[op] = src[ip]
-        op += 1
-        ip += 1
-        lit += 1
-        if lit == 32:
-            dst[op - lit - 1] = lit - 1
-            lit = 0
-            op += 1
     if lit:
         dst[op - lit - 1] = lit - 1
     else:
