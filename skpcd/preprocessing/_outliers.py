@@ -187,10 +187,15 @@ class RadiusOutlierFilter(_OutlierFilter):
     >>> from skpcd.preprocessing import RadiusOutlierFilter
     >>> rng = np.random.default_rng(0)
     >>> plane = np.column_stack([rng.uniform(0, 10, (2000, 2)), np.zeros(2000)])
-    >>> X = np.vstack([plane, [[1000.0, 0.0, 0.0]]])
-    >>> labels = RadiusOutlierFilter().fit_predict(X)
-    >>> int((labels == -1).sum()), int(labels[-1])
-    (1, -1)
+
+    A lone point and a pair of points 0.2 apart, far from a plane: with
+    ``min_neighbors=2`` the pair is flagged too, with 1 it is kept.
+
+    >>> X = np.vstack([plane, [[1000.0, 0, 0], [50.0, 0, 0], [50.2, 0, 0]]])
+    >>> RadiusOutlierFilter(radius=0.5).fit_predict(X)[-3:]
+    array([-1, -1, -1])
+    >>> RadiusOutlierFilter(radius=0.5, min_neighbors=1).fit_predict(X)[-3:]
+    array([-1,  1,  1])
     """
 
     _parameter_constraints: typing.ClassVar[dict] = {
