@@ -125,6 +125,18 @@ def is_float32_exact(values):
         return np.array_equal(values.astype(np.float32), values, equal_nan=True)
 
 
+def coordinate_names(names):
+    """``{name in the file: "x" | "y" | "z"}`` for files whose coordinates
+    are named ``X``, ``Y``, ``Z`` (PDAL's dimension names, as its
+    ``writers.numpy`` and the PCD files of its test data have them): the
+    renaming to apply when the file has upper-case ``X``, ``Y`` and ``Z``
+    and none of ``x``, ``y``, ``z``; empty otherwise."""
+    names = set(names)
+    if names.isdisjoint("xyz") and names.issuperset("XYZ"):
+        return {"X": "x", "Y": "y", "Z": "z"}
+    return {}
+
+
 def coordinate_columns(fields):
     """``[(name, values)]`` for x, y, z, as float32 when float32 holds all
     three exactly, else as float64."""

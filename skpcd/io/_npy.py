@@ -7,7 +7,8 @@ the shape times the item size -- equal to what the file holds after the
 header, so that a corrupt shape never allocates memory the file does not
 back. A plain array must be 2-D with at least 3 numeric columns (x, y, z,
 then ``field_3``...); a structured array 1-D with scalar numeric fields x,
-y and z (other fields are kept, a sub-array field as ``(n, c)``).
+y and z, or X, Y and Z as PDAL names them (other fields are kept, a
+sub-array field as ``(n, c)``).
 """
 
 import importlib
@@ -17,6 +18,7 @@ import tokenize
 import numpy as np
 
 from skpcd.exceptions import PointCloudFileError
+from skpcd.io._common import coordinate_names
 
 _NUMERIC = "iuf"  # integer, unsigned, float: what can be a coordinate
 _ZIP = (b"PK\x03\x04", b"PK\x05\x06")  # a zip member, an empty zip
@@ -130,12 +132,26 @@ def read(path):
     """Read an ``.npy`` cloud into ``(fields, info)``; see the module docstring."""
     data = _load(path)
     names = data.dtype.names
+    renamed = coordinate_names(names or ())
+    if renamed:  # PDAL's X Y Z (its writers.numpy and readers.numpy)
+        data = data.view(
+            np.dtype(
+                {
+                    "names": [renamed.get(n, n) for n in names],
+                    "formats": [data.dtype.fields[n][0] for n in names],
+                    "offsets": [data.dtype.fields[n][1] for n in names],
+                    "itemsize": data.dtype.itemsize,
+                }
+            )
+        )
+        names = data.dtype.names
     if names:
         missing = [c for c in "xyz" if c not in names]
         if missing or data.ndim != 1:
             raise PointCloudFileError(
                 path,
-                "a structured .npy cloud needs 1-D records with fields x, y, z; "
+                "a structured .npy cloud needs 1-D records with fields x, y, z (or "
+                "X, Y, Z); "
                 f"found shape {data.shape} with fields {', '.join(names)}.",
             )
         for c in "xyz":

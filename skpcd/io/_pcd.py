@@ -4,7 +4,7 @@ A text header (``VERSION``, ``FIELDS``, ``SIZE``, ``TYPE``, ``COUNT``,
 ``WIDTH``, ``HEIGHT``, ``VIEWPOINT``, ``POINTS``, then ``DATA``; ``#`` lines
 are comments) followed by the data in one of three encodings:
 
-- ``ascii``: one point per line.
+- ``ascii``: one point per line, values apart by spaces, tabs or commas.
 - ``binary``: little-endian records, one per point, fields in header order.
 - ``binary_compressed``: two little-endian uint32 (compressed and
   uncompressed size) then an LZF stream whose content is column-major: all
@@ -15,9 +15,11 @@ supported, with any ``COUNT``; fields with a count above one are returned as
 ``(n, count)`` arrays. Packed colours (``rgb`` or ``rgba``, 4 bytes) are
 returned as float32, PCL's type for them, also when stored as ``U 4`` (as PCL
 writes them in ascii, and so does :func:`write`): the bits are kept. PCL's
-``_`` padding fields are skipped. Organized clouds (``HEIGHT`` > 1) are
-returned flat in row-major order, invalid points as stored (NaN); ``info``
-keeps ``width``, ``height``, ``viewpoint``, ``version`` and ``encoding``.
+``_`` padding fields are skipped. Coordinates named ``X Y Z`` (as in PDAL's
+test data) are read as ``x y z`` when the file has no ``x``, ``y``, ``z``.
+Organized clouds (``HEIGHT`` > 1) are returned flat in row-major order,
+invalid points as stored (NaN); ``info`` keeps ``width``, ``height``,
+``viewpoint``, ``version`` and ``encoding``.
 
 The data must hold exactly ``POINTS`` points: missing bytes, or a different
 count of ascii lines, are errors; so are bytes after the binary data, unless
@@ -40,6 +42,7 @@ from skpcd.io._common import (
     ascii_rows,
     check_integral,
     coordinate_columns,
+    coordinate_names,
     data_lines,
     distinct_columns,
     field_columns,
@@ -204,6 +207,10 @@ def _layout(path, header):
             seen.add(name)
         code = {"I": "i", "U": "u", "F": "f"}[kind]
         layout.append((name, np.dtype(f"<{code}{size}"), count))
+    renamed = coordinate_names(seen)
+    if renamed:  # PDAL's X Y Z
+        layout = [(renamed.get(name, name), dt, c) for name, dt, c in layout]
+        seen = {renamed.get(name, name) for name in seen}
     missing = [c for c in "xyz" if c not in seen]
     if missing:
         raise _fail(
@@ -332,7 +339,8 @@ def _read_compressed(path, body, layout, n):
 
 
 def _read_ascii(path, body, layout, n):
-    lines = data_lines(body)
+    # values apart by spaces, tabs or commas (PDAL reads all three)
+    lines = [line.replace(",", " ") for line in data_lines(body)]
     if len(lines) != n:
         raise _fail(
             path,

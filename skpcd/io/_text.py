@@ -137,7 +137,9 @@ def read(path):
         ):
             warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
             data = np.loadtxt(
-                fh,
+                # a line of only spaces or a comment is no point, with any
+                # delimiter (with commas loadtxt would read one empty column)
+                (line if _uncomment(line).strip() else "\n" for line in fh),
                 delimiter=delimiter,
                 comments=("#", "//"),
                 skiprows=skip,
