@@ -10,7 +10,7 @@ way a command ends (:func:`skpcd.cli._common.run`).
 import argparse
 import sys
 
-from skpcd.cli import _describe, _evaluate, _info, _model, _segment
+from skpcd.cli import _describe, _evaluate, _info, _model, _review, _segment
 from skpcd.cli._common import on_cluster, run
 from skpcd.cli._evaluate import format_report
 
@@ -38,6 +38,7 @@ def build_parser():
     _model.add_parsers(sub)
     _describe.add_parser(sub)
     _segment.add_parsers(sub)
+    _review.add_parser(sub)
     return parser
 
 
