@@ -12,15 +12,18 @@ A model file is one small container (see :ref:`models`)::
 :func:`load_model` checks the signature, the sizes, both checksums, the type
 of every header field and the library versions before it deserialises
 anything; a skops payload is then rebuilt only if every type it names that
-skops does not trust by itself is in ``TRUSTED_TYPES``, and the decision
-trees it holds are checked for node indices that scikit-learn would follow
-out of bounds. A joblib payload, and the bare joblib pickles that skpcd wrote
+skops does not trust by itself is in ``TRUSTED_TYPES``, and its structure
+is checked: the node indices of its decision trees, which scikit-learn would
+follow out of bounds, and the sizes its parts share (features, outputs and
+classes of trees and their ensembles, ``classes_`` against ``n_classes_``,
+the width of each pipeline step against the next). A joblib payload, and the bare joblib pickles that skpcd wrote
 before this format, run code from the file when loaded: they need
 ``trust_pickle=True``.
 """
 
 import hashlib
 import io
+import itertools
 import json
 import os
 import platform
@@ -418,8 +421,10 @@ def _from_joblib(path, source):
         ) from exc
 
 
-def _check_tree(path, tree, owner):
-    """Node indices that scikit-learn follows without bounds checks."""
+def _check_tree(path, tree, owner, classifier):
+    """Node indices that scikit-learn follows without bounds checks, and the
+    sizes the tree shares with ``owner`` (the estimator that calls it):
+    features, outputs and, for a ``classifier`` tree, classes."""
     n = tree.node_count
 
     def bad(problem):
@@ -444,6 +449,79 @@ def _check_tree(path, tree, owner):
     expected = getattr(owner, "n_features_in_", None)
     if isinstance(expected, (int, np.integer)) and tree.n_features != expected:
         raise bad(f"expects {tree.n_features} features, its estimator {expected}")
+    if not np.isfinite(tree.value).all():
+        raise bad("has leaf values that are not finite")
+    outputs = getattr(owner, "n_outputs_", None)
+    if isinstance(outputs, (int, np.integer)) and tree.n_outputs != outputs:
+        raise bad(f"has {tree.n_outputs} outputs, its estimator {outputs}")
+    classes = _class_counts(owner) if classifier else None
+    if classes is not None and tree.n_classes.tolist() != classes:
+        raise bad(
+            f"tells {tree.n_classes.tolist()} classes, its estimator "
+            f"{classes} (n_classes_)"
+        )
+
+
+def _class_counts(est):
+    """The number of classes of each output that a classifier's
+    ``n_classes_`` gives, as a list; None without one."""
+    n = getattr(est, "n_classes_", None)
+    if isinstance(n, (int, np.integer)):
+        return [int(n)]
+    if isinstance(n, (list, np.ndarray)) and all(
+        isinstance(v, (int, np.integer)) for v in np.ravel(n).tolist()
+    ):
+        return [int(v) for v in np.ravel(n).tolist()]
+    return None
+
+
+def _check_classes(path, est, attrs):
+    """A classifier's ``classes_`` as many as its ``n_classes_`` (one array
+    per output when there are several)."""
+    counts, classes = _class_counts(est), attrs.get("classes_")
+    if counts is None or classes is None:
+        return
+    per_output = (
+        [classes] if len(counts) == 1 and isinstance(classes, np.ndarray) else classes
+    )
+    sizes = [len(c) if isinstance(c, np.ndarray) else None for c in per_output]
+    if sizes != counts:
+        raise PointCloudFileError(
+            path,
+            f"corrupt model: its {type(est).__name__} has {sizes} classes_ but "
+            f"n_classes_ says {counts}",
+        )
+
+
+def _width(step):
+    """Number of columns a fitted transformer gives, from its
+    ``get_feature_names_out`` (no data goes through it); None when it does
+    not tell."""
+    names = getattr(step, "get_feature_names_out", None)
+    if names is None:
+        return None
+    try:
+        return len(names())
+    except Exception:  # a transformer that cannot tell without data
+        return None
+
+
+def _check_pipeline(path, pipe):
+    """Each step of a pipeline expects as many columns as the step before
+    it gives."""
+    steps = [s for _, s in pipe.steps if s is not None and not isinstance(s, str)]
+    for before, after in itertools.pairwise(steps):
+        expected = getattr(after, "n_features_in_", None)
+        if not isinstance(expected, (int, np.integer)):
+            continue
+        given = _width(before)
+        if given is not None and given != expected:
+            raise PointCloudFileError(
+                path,
+                f"corrupt model: its {type(before).__name__} gives {given} "
+                f"features but the {type(after).__name__} after it expects "
+                f"{expected}",
+            )
 
 
 _OURS = ("sklearn.", "skpcd.")
@@ -464,17 +542,23 @@ def _flat(items):
 
 
 def _check_trees(path, model):
-    """Check every decision tree reachable from ``model``.
+    """Check the structure of ``model``: every decision tree reachable from
+    it, the classes of its classifiers and the widths of its pipelines.
 
     scikit-learn indexes the node arrays of its trees without bounds checks,
     so a file with wrong indices would crash or hang ``predict``; a forest
     hands its trees its own input unchecked, so they must expect as many
-    features as it does.
+    features, outputs and classes as it does. A classifier whose
+    ``classes_`` and ``n_classes_`` disagree, a fitted ensemble without
+    estimators, or a pipeline step that gives another number of features
+    than the next one expects would load and then fail in ``predict`` with
+    a scikit-learn error, or answer wrong classes.
     """
     # loaded here: scikit-learn's tree module takes a quarter of a second to import
+    from sklearn.pipeline import Pipeline
     from sklearn.tree._tree import Tree
 
-    seen = set()
+    seen, pipelines = set(), []
     stack = [(model, None)]
     while stack:
         obj, owner = stack.pop()
@@ -482,7 +566,7 @@ def _check_trees(path, model):
             continue
         seen.add(id(obj))
         if isinstance(obj, Tree):
-            _check_tree(path, obj, owner)
+            _check_tree(path, obj, owner, classifier=True)
         elif isinstance(obj, np.ndarray):
             if obj.dtype.hasobject:
                 stack.extend((item, owner) for item in obj.ravel().tolist())
@@ -493,7 +577,15 @@ def _check_trees(path, model):
         elif isinstance(obj, BaseEstimator) or _module(obj).startswith(_OURS):
             attrs = vars(obj) if hasattr(obj, "__dict__") else {}
             stack.extend((item, obj) for item in attrs.values())
+            _check_classes(path, obj, attrs)
+            if isinstance(obj, Pipeline):
+                pipelines.append(obj)
             subs = attrs.get("estimators_")
+            if "n_features_in_" in attrs and isinstance(subs, list) and not subs:
+                raise PointCloudFileError(
+                    path, f"corrupt model: its fitted {type(obj).__name__} holds "
+                    "no estimators"
+                )  # fmt: skip
             if (
                 "n_features_in_" in attrs
                 and isinstance(subs, (list, tuple, np.ndarray))
@@ -502,7 +594,10 @@ def _check_trees(path, model):
                 for sub in _flat(subs):
                     tree = getattr(sub, "tree_", None)
                     if isinstance(tree, Tree):
-                        _check_tree(path, tree, obj)
+                        _check_tree(path, tree, obj, hasattr(sub, "classes_"))
+    # last: the widths are asked of the steps, whose trees are now checked
+    for pipe in pipelines:
+        _check_pipeline(path, pipe)
 
 
 def load_model(
@@ -561,9 +656,15 @@ def load_model(
     sizes, both SHA-256 checksums, the header fields and the versions are
     checked before the estimator is rebuilt; skops then imports and builds
     only types it trusts or that are listed in ``TRUSTED_TYPES`` (or
-    ``trusted``), without calling any function named by the file. Decision
-    trees are checked for node indices out of range before the model is
-    returned.
+    ``trusted``), without calling any function named by the file. Before
+    the model is returned its structure is checked: decision trees for node
+    indices out of range and non-finite leaf values; trees against the
+    estimator that calls them (features, outputs, classes); ``classes_``
+    against ``n_classes_``; a fitted ensemble for at least one estimator;
+    each pipeline step's output width (its ``get_feature_names_out``)
+    against the next step's ``n_features_in_``. A model that fails raises
+    :class:`~skpcd.exceptions.PointCloudFileError` naming the problem, where
+    it would otherwise fail in ``predict`` or answer wrong classes.
     """
     path = Path(os.fspath(path))
     if not path.is_file():

@@ -539,3 +539,142 @@ def test_crafted_trees_are_refused_before_predict(tmp_path):
         tmp_path,
     )
     assert out.count("refused") == 5, out
+
+
+def _forest_pipeline():
+    from skpcd.datasets import make_urban_objects
+    from skpcd.features import ShapeFeatures
+
+    clouds, labels = make_urban_objects(n_per_class=3, random_state=0)
+    forest = RandomForestClassifier(n_estimators=4, random_state=0)
+    return make_pipeline(ShapeFeatures(), forest).fit(clouds, labels), clouds
+
+
+def _retree(tree, n_features=None, values=None, nodes=None):
+    """A copy of a fitted ``Tree`` with other sizes or arrays."""
+    from sklearn.tree._tree import Tree
+
+    state = tree.__getstate__()
+    n, classes, outputs = tree.__reduce__()[1]
+    if values is not None:
+        classes = np.full(outputs, values.shape[2], dtype=np.intp)
+    new = Tree(n_features or n, classes, outputs)
+    new.__setstate__(
+        dict(
+            state,
+            nodes=state["nodes"] if nodes is None else nodes,
+            values=state["values"] if values is None else values,
+        )
+    )
+    return new
+
+
+def _short_classes(forest):
+    forest.classes_ = forest.classes_[:2]
+
+
+def _long_classes(forest):
+    forest.classes_ = np.r_[forest.classes_, ["x", "y"]]
+
+
+def _fewer_n_classes(forest):
+    forest.n_classes_ = 2
+
+
+def _tree_of_two_classes(forest):
+    tree = forest.estimators_[0]
+    values = np.ascontiguousarray(tree.tree_.__getstate__()["values"][:, :, :2])
+    tree.tree_ = _retree(tree.tree_, values=values)
+    tree.classes_, tree.n_classes_ = tree.classes_[:2], 2
+
+
+def _nan_leaves(forest):
+    tree = forest.estimators_[0]
+    values = tree.tree_.__getstate__()["values"].copy()
+    values[:] = np.nan
+    tree.tree_ = _retree(tree.tree_, values=values)
+
+
+def _no_trees(forest):
+    forest.estimators_ = []
+
+
+def _two_outputs(forest):
+    forest.n_outputs_ = 2
+
+
+def _descriptor_width(forest):
+    # the forest and its trees agree on 3 features; ShapeFeatures gives 18
+    forest.n_features_in_ = 3
+    for tree in forest.estimators_:
+        nodes = tree.tree_.__getstate__()["nodes"].copy()
+        inner = nodes["feature"] >= 0
+        nodes["feature"][inner] %= 3
+        tree.tree_ = _retree(tree.tree_, n_features=3, nodes=nodes)
+        tree.n_features_in_ = 3
+
+
+_STRUCTURE_EDITS = {
+    _short_classes: "has [2] classes_ but n_classes_ says [5]",
+    _long_classes: "has [7] classes_ but n_classes_ says [5]",
+    _fewer_n_classes: "has [5] classes_ but n_classes_ says [2]",
+    _tree_of_two_classes: "tells [2] classes, its estimator [5]",
+    _nan_leaves: "leaf values that are not finite",
+    _no_trees: "RandomForestClassifier holds no estimators",
+    _two_outputs: "has 1 outputs, its estimator 2",
+    _descriptor_width: "ShapeFeatures gives 18 features but the "
+    "RandomForestClassifier after it expects 3",
+}
+
+
+@pytest.mark.parametrize("edit", _STRUCTURE_EDITS, ids=lambda e: e.__name__)
+def test_crafted_structure_is_refused_when_loading(tmp_path, edit):
+    # issue 29 item 14: such files, with valid checksums, loaded and then
+    # failed in predict with scikit-learn's IndexError or ValueError (or
+    # answered with wrong classes)
+    model, clouds = _forest_pipeline()
+    expected = model.predict(clouds)
+    edit(model[-1])
+    try:  # the harm: scikit-learn's error in predict, or answers that do not fit
+        proba, answer = model.predict_proba(clouds), model.predict(clouds)
+    except (IndexError, ValueError):
+        pass
+    else:
+        assert (
+            not np.array_equal(answer, expected)
+            or not np.isfinite(proba).all()
+            or proba.shape[1] != len(model.classes_)
+        )
+    path = save_model(model, tmp_path / "crafted.skpcd")
+    with pytest.raises(PointCloudFileError) as info:
+        load_model(path)
+    text = str(info.value)
+    assert text.startswith(f"{path}: corrupt model: ") and "\n" not in text
+    assert _STRUCTURE_EDITS[edit] in text
+
+
+@pytest.mark.parametrize("multi", [False, True])
+def test_sound_ensembles_pass_the_structure_check(tmp_path, multi):
+    from sklearn.ensemble import (
+        AdaBoostClassifier,
+        ExtraTreesRegressor,
+        GradientBoostingClassifier,
+    )
+    from sklearn.tree import DecisionTreeClassifier
+
+    rng = np.random.default_rng(0)
+    X, y = rng.random((60, 4)), np.arange(60) % 3
+    target = np.column_stack([y, y % 2]) if multi else y
+    models = [
+        RandomForestClassifier(n_estimators=3, random_state=0).fit(X, target),
+        DecisionTreeClassifier(random_state=0).fit(X, target),
+        ExtraTreesRegressor(n_estimators=3, random_state=0).fit(X, target),
+    ]
+    if not multi:
+        models += [
+            GradientBoostingClassifier(n_estimators=3, random_state=0).fit(X, y),
+            AdaBoostClassifier(n_estimators=3, random_state=0).fit(X, y),
+        ]
+    for model in models:
+        back = load_model(save_model(model, tmp_path / "m.skpcd", overwrite=True))
+        np.testing.assert_array_equal(back.predict(X), model.predict(X))
