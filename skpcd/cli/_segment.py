@@ -158,6 +158,16 @@ def add_parsers(sub):
     ident.add_argument(
         "-o", "--output", required=True, help="labelled scene (.las .laz .ply .pcd...)"
     )
+    ident.add_argument(
+        "--classes-into",
+        choices=("classification", "extra"),
+        default="classification",
+        help="LAS/LAZ output: write the classes into classification (ASPRS "
+        "codes where they exist: building 6, tree 5, wire 14...; user codes 64+ "
+        "otherwise; the input's classification kept in original_classification; "
+        "what viewers colour by) or leave classification as it was, ground "
+        "aside (default classification)",
+    )
     add_segmentation_options(ident)
     add_trust_pickle(ident)
     ident.set_defaults(func=run_identify)
@@ -316,6 +326,7 @@ def run_segment(args):
             format=args.format,
             metadata=_metadata(args, result),
             overwrite=args.overwrite,
+            las_header=_las_header(args),
         )
     except ValueError as exc:  # a field the format cannot hold
         raise CommandError("segment", str(exc)) from exc
@@ -326,6 +337,15 @@ def run_segment(args):
 
 def _is_las(path):
     return Path(path).suffix.lower() in (".las", ".laz")
+
+
+def _las_header(args):
+    """The header of a LAS/LAZ scene, which LAS/LAZ segment files carry."""
+    if not (_is_las(args.scene) and args.format in ("las", "laz")):
+        return None
+    from skpcd.io._las_reader import read_las_header
+
+    return read_las_header(args.scene)
 
 
 def run_identify(args):
@@ -389,6 +409,7 @@ def run_identify(args):
                 ground=result.ground,
                 # a LAS/LAZ copy always keeps every dimension of the scan
                 keep_fields=args.keep_fields or (_is_las(args.scene) and _is_las(out)),
+                classes_into=args.classes_into,
             )
         except ValueError as exc:  # a field the format cannot hold, ...
             raise CommandError("identify", str(exc)) from exc

@@ -1,21 +1,35 @@
-"""Reading and writing point clouds (text, NPY, PLY, PCD, LAS/LAZ) and models."""
+"""Reading and writing point clouds (text, NPY, PLY, PCD, LAS/LAZ) and models.
 
-from skpcd.io._api import SUPPORTED_EXTENSIONS, read_point_cloud, write_point_cloud
-from skpcd.io._labelled import read_class_names, write_labelled_scan
-from skpcd.io._las import LasExtent, iter_points, read_las_extent
-from skpcd.io._model import load_model, save_model
-from skpcd.io._segment_folder import read_segments
+The functions are loaded on first use, so that the readers load without
+scikit-learn (which only the model files need): ``skpcd info`` stays fast.
+"""
 
-__all__ = [
-    "SUPPORTED_EXTENSIONS",
-    "LasExtent",
-    "iter_points",
-    "load_model",
-    "read_class_names",
-    "read_las_extent",
-    "read_point_cloud",
-    "read_segments",
-    "save_model",
-    "write_labelled_scan",
-    "write_point_cloud",
-]
+import importlib
+
+_PUBLIC = {
+    "SUPPORTED_EXTENSIONS": "skpcd.io._api",
+    "LasExtent": "skpcd.io._las",
+    "iter_points": "skpcd.io._las",
+    "load_model": "skpcd.io._model",
+    "read_class_names": "skpcd.io._labelled",
+    "read_las_extent": "skpcd.io._las",
+    "read_point_cloud": "skpcd.io._api",
+    "read_segments": "skpcd.io._segment_folder",
+    "save_model": "skpcd.io._model",
+    "write_labelled_scan": "skpcd.io._labelled",
+    "write_point_cloud": "skpcd.io._api",
+}
+
+__all__ = sorted(_PUBLIC)
+
+
+def __getattr__(name):
+    if name in _PUBLIC:
+        value = getattr(importlib.import_module(_PUBLIC[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'skpcd.io' has no attribute {name!r}")
+
+
+def __dir__():
+    return __all__

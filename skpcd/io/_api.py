@@ -117,8 +117,7 @@ def read_point_cloud(path, *, fields=None, nonfinite="drop"):
         The file. Its extension selects the format: ``.xyz``, ``.txt``,
         ``.pts``, ``.csv`` (text), ``.npy``, ``.ply`` (ascii, binary little or
         big endian), ``.pcd`` (ascii, binary, binary_compressed) and
-        ``.las``/``.laz`` (needs the ``las`` extra: ``pip install
-        skpcd[las]``).
+        ``.las``/``.laz`` (through laspy and lazrs).
     fields : None, "all" or list of str, default=None
         Extra per-point fields to return besides xyz, by their name in the
         file (``"intensity"``, ``"classification"``...). ``"normals"`` and

@@ -19,10 +19,11 @@ import numpy as np
 from skpcd.exceptions import MissingFileError, NonFiniteWarning, PointCloudFileError
 from skpcd.io._api import SUPPORTED_EXTENSIONS, read_point_cloud, write_point_cloud
 from skpcd.io._atomic import atomic_path
+from skpcd.io._class_codes import classification_codes
 from skpcd.io._common import check_chunk_size, take_rows
-from skpcd.io._copc import COPC_USER_ID
 from skpcd.io._las_reader import checked_chunks, open_checked, read_vlr_records
 from skpcd.io._las_structure import decoding, import_laspy
+from skpcd.io._las_writer import carried_header
 from skpcd.io._las_writer import write as write_las
 
 __all__ = ["read_class_names", "write_labelled_scan"]
@@ -39,6 +40,16 @@ _LOOKUP_USER_ID = "LASF_Spec"
 _LOOKUP_RECORD_ID = 0
 _LAS = (".las", ".laz")
 _RESERVED = ("segment", "class", "ground")
+#: ASPRS class of the points without a class (and not ground) when the
+#: classes go into ``classification``
+UNCLASSIFIED = 1
+#: the extra dimension that keeps the input's classification
+ORIGINAL = "original_classification"
+_CLASSES_INTO = ("classification", "extra")
+# LAS 1.4 point format of the same fields as a legacy one (0 to 5), whose
+# classification holds only 0 to 31
+_UPGRADE = {0: 6, 1: 6, 2: 7, 3: 7, 4: 9, 5: 10}
+_SCAN_ANGLE_UNIT = 0.006  # degrees per unit of scan_angle (formats 6 to 10)
 _INT32 = np.iinfo(np.int32)
 
 
@@ -151,7 +162,7 @@ def _lookup_name(name):
     return text.replace(b"\0", b"?")
 
 
-def _names_json(class_names, score_name, has_ground):
+def _names_json(class_names, score_name, has_ground, codes=None):
     record = {
         "skpcd_labelled_scan": 1,
         "classes": {str(FIRST_CODE + j): name for j, name in enumerate(class_names)},
@@ -164,7 +175,13 @@ def _names_json(class_names, score_name, has_ground):
         },
         "no_segment": -1,
         "ground_classification": GROUND_CLASS if has_ground else None,
+        "classes_into": "extra" if codes is None else "classification",
     }
+    if codes is not None:
+        record["classification"] = {
+            str(code): name for code, name in _code_names(class_names, codes).items()
+        }
+        record["original_classification"] = ORIGINAL
     data = json.dumps(record, ensure_ascii=False, separators=(",", ":")).encode()
     if len(data) > 65535:
         raise ValueError(
@@ -174,10 +191,34 @@ def _names_json(class_names, score_name, has_ground):
     return data
 
 
-def _class_vlrs(laspy, class_names, score_name, has_ground, existing=()):
-    """The Classification Lookup VLR (entries below 64 of an existing one kept)
-    and the skpcd VLR with the full names."""
+def _code_names(class_names, codes):
+    """Classification code -> name of what skpcd writes into
+    ``classification`` (a code of several classes names them all)."""
+    names = {UNCLASSIFIED: "unclassified"}
+    for name, code in zip(class_names, codes, strict=True):
+        names[code] = (
+            name
+            if names.get(code) in (None, "unclassified")
+            else (f"{names[code]}/{name}")
+        )
+    return dict(sorted(names.items()))
+
+
+def _class_vlrs(laspy, class_names, score_name, has_ground, existing=(), codes=None):
+    """The Classification Lookup VLR and the skpcd VLR with the full names.
+
+    With ``codes`` (the classes written into ``classification``), the lookup
+    names exactly the codes written: 1 (unclassified), 2 (ground, with
+    ``has_ground``) and the code of each class. Without, it names the codes
+    64 + j of the ``class`` dimension, entries below 64 of an existing one
+    kept."""
     entries = {}
+    if codes is not None:
+        existing = ()
+        if has_ground:
+            entries[GROUND_CLASS] = b"ground"
+        for code, name in _code_names(class_names, codes).items():
+            entries[code] = _lookup_name(name)
     for vlr in existing:
         if (
             vlr.user_id == _LOOKUP_USER_ID
@@ -187,8 +228,9 @@ def _class_vlrs(laspy, class_names, score_name, has_ground, existing=()):
             for code, text in vlr.lookups.items():
                 if code < FIRST_CODE:
                     entries[int(code)] = text.encode("ascii", "replace")[:15]
-    for j, name in enumerate(class_names):
-        entries[FIRST_CODE + j] = _lookup_name(name)
+    if codes is None:
+        for j, name in enumerate(class_names):
+            entries[FIRST_CODE + j] = _lookup_name(name)
     lookup = b"".join(
         code.to_bytes(1, "little") + text.ljust(15, b"\0")
         for code, text in sorted(entries.items())
@@ -199,7 +241,7 @@ def _class_vlrs(laspy, class_names, score_name, has_ground, existing=()):
             SKPCD_USER_ID,
             SKPCD_RECORD_ID,
             "skpcd class names (JSON)",
-            _names_json(class_names, score_name, has_ground),
+            _names_json(class_names, score_name, has_ground, codes),
         ),
     ]
 
@@ -209,12 +251,6 @@ def _is_ours(vlr):
         (_LOOKUP_USER_ID, _LOOKUP_RECORD_ID),
         (SKPCD_USER_ID, SKPCD_RECORD_ID),
     )
-
-
-def _is_copc(vlr):
-    """A COPC record (info, hierarchy, extents): it describes the octree
-    order of the source's points, which a copy does not keep."""
-    return vlr.user_id == COPC_USER_ID
 
 
 def _new_dims(laspy, score_name, has_ground):
@@ -299,7 +335,37 @@ def _written(score_name, has_ground):
     return names
 
 
-def _stream_las(source, output, arrays, class_names, score_name, keep_fields, chunk):
+def _upgraded(laspy, header, codes):
+    """``header`` with the LAS 1.4 point format of the same fields when its
+    legacy point format (0 to 5, classification 0 to 31) cannot hold the
+    codes; None when it can."""
+    fmt = header.point_format
+    if fmt.id not in _UPGRADE or max(codes, default=0) <= 31:
+        return None
+    point_format = laspy.PointFormat(_UPGRADE[fmt.id])
+    for dim in fmt.extra_dimensions:
+        point_format.dimensions.append(dim)
+    header.set_version_and_point_format(laspy.header.Version(1, 4), point_format)
+    return header
+
+
+def _copy_upgraded(record, points, names):
+    """The dimensions ``names`` of a legacy-format chunk into a record of
+    its LAS 1.4 counterpart (scan_angle_rank in degrees becomes scan_angle
+    in units of 0.006 degree)."""
+    for name in names:
+        if name == "scan_angle_rank":
+            degrees = np.asarray(points[name], dtype=np.float64)
+            record["scan_angle"] = np.round(degrees / _SCAN_ANGLE_UNIT).astype(np.int16)
+        elif name not in ("X", "Y", "Z"):
+            record[name] = points[name]
+    for axis in "XYZ":
+        record[axis] = points[axis]
+
+
+def _stream_las(
+    source, output, arrays, class_names, score_name, keep_fields, chunk, codes
+):
     laspy = import_laspy()
     has_ground = arrays["ground"] is not None
     with open_checked(laspy, source) as (reader, n_points):
@@ -310,21 +376,38 @@ def _stream_las(source, output, arrays, class_names, score_name, keep_fields, ch
                 f"score_name {score_name!r} is a standard LAS dimension; pick another"
             )
         with decoding(source):  # laspy's parsing of the source's header
-            header = reader.header.copy()
+            header = carried_header(reader.header)
             ours = _written(score_name, has_ground)
             extra = list(header.point_format.extra_dimension_names)
-            drop = [n for n in extra if n in ours or not keep_fields]
+            # an earlier output's original classification is the original
+            keep_original = codes is not None and ORIGINAL in extra
+            drop = [
+                n
+                for n in extra
+                if n in ours or not (keep_fields or (keep_original and n == ORIGINAL))
+            ]
             if drop:
                 header.remove_extra_dims(drop)
-            header.add_extra_dims(_new_dims(laspy, score_name, has_ground))
-            vlrs = [v for v in header.vlrs if not (_is_ours(v) or _is_copc(v))]
+            names = list(header.point_format.dimension_names)
+            kept_raw = [
+                n for n in reader.header.point_format.dtype().names if n not in drop
+            ]
+            new_dims = _new_dims(laspy, score_name, has_ground)
+            if codes is not None and not keep_original:
+                new_dims.append(
+                    laspy.ExtraBytesParams(
+                        ORIGINAL, "uint8", description="classification of the input"
+                    )
+                )
+            header.add_extra_dims(new_dims)
+            upgraded = codes is not None and _upgraded(laspy, header, codes)
+            vlrs = [v for v in header.vlrs if not _is_ours(v)]
             header.vlrs = vlrs + _class_vlrs(
-                laspy, class_names, score_name, has_ground, existing=header.vlrs
+                laspy, class_names, score_name, has_ground, header.vlrs, codes
             )
-            evlrs = [v for v in header.evlrs or () if not _is_copc(v)]
-            names = reader.header.point_format.dtype().names
-            kept = [n for n in names if n not in drop]
+            evlrs = list(header.evlrs or ())
         n_classes = len(class_names)
+        code_of = None if codes is None else np.array([UNCLASSIFIED, *codes])
         with atomic_path(output, overwrite=True) as tmp:
             compress = output.suffix.lower() == ".laz"
             with laspy.open(
@@ -338,14 +421,22 @@ def _stream_las(source, output, arrays, class_names, score_name, keep_fields, ch
                     record = laspy.ScaleAwarePointRecord.zeros(
                         len(points), header=writer.header
                     )
-                    for name in kept:
-                        record.array[name] = points.array[name]
-                    if has_ground and values["ground"].any():
-                        classification = np.array(record["classification"])
-                        classification[values["ground"]] = GROUND_CLASS
-                        record["classification"] = classification
-                    record["segment"] = values["segment"]
+                    if upgraded:
+                        _copy_upgraded(record, points, names)
+                    else:
+                        for name in kept_raw:
+                            record.array[name] = points.array[name]
                     index = values["class_index"]
+                    if code_of is not None:
+                        classification = code_of[index + 1]
+                        if not keep_original:
+                            record[ORIGINAL] = np.asarray(points["classification"])
+                    else:
+                        classification = np.array(record["classification"])
+                    if has_ground:
+                        classification[values["ground"]] = GROUND_CLASS
+                    record["classification"] = classification
+                    record["segment"] = values["segment"]
                     record["class"] = np.where(index >= 0, index + FIRST_CODE, 0)
                     if score_name is not None:
                         record[score_name] = values["score"]
@@ -359,7 +450,7 @@ def _stream_las(source, output, arrays, class_names, score_name, keep_fields, ch
                     writer.write_evlrs(laspy.vlrs.vlrlist.VLRList(evlrs))
 
 
-def _in_memory(source, output, arrays, class_names, score_name, keep_fields):
+def _in_memory(source, output, arrays, class_names, score_name, keep_fields, codes):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NonFiniteWarning)
         read = read_point_cloud(
@@ -386,7 +477,9 @@ def _in_memory(source, output, arrays, class_names, score_name, keep_fields):
                 stacklevel=3,
             )
             points, fields, values = take_rows(finite, points, fields, values)
-        _write_las_memory(output, points, fields, values, class_names, score_name)
+        _write_las_memory(
+            output, points, fields, values, class_names, score_name, codes
+        )
         return
     if has_ground and "classification" in fields:
         classification = np.array(fields["classification"])
@@ -414,19 +507,23 @@ def _spread(values, finite):
     return out
 
 
-def _write_las_memory(output, points, fields, values, class_names, score_name):
+def _write_las_memory(output, points, fields, values, class_names, score_name, codes):
     """A LAS/LAZ output from a source of another format: skpcd's own LAS
     layout (see :mod:`skpcd.io._las`) with the labelled dimensions."""
     laspy = import_laspy()
     has_ground = "ground" in values
     out = {c: points[:, j] for j, c in enumerate("xyz")}
     out.update(fields)
+    index = values["class_index"]
+    if codes is not None:
+        if "classification" in out and ORIGINAL not in out:
+            out[ORIGINAL] = out["classification"]
+        out["classification"] = np.array([UNCLASSIFIED, *codes])[index + 1]
     if has_ground or "classification" in out:
         classification = np.array(out.get("classification", np.zeros(len(points))))
         if has_ground:
             classification[values["ground"]] = GROUND_CLASS
         out["classification"] = classification
-    index = values["class_index"]
     out["segment"] = values["segment"]
     out["class"] = np.where(index >= 0, index + FIRST_CODE, 0).astype(np.uint8)
     if score_name is not None:
@@ -439,7 +536,7 @@ def _write_las_memory(output, points, fields, values, class_names, score_name):
             tmp,
             out,
             extra_params=dims,
-            vlrs=_class_vlrs(laspy, class_names, score_name, has_ground),
+            vlrs=_class_vlrs(laspy, class_names, score_name, has_ground, codes=codes),
         )
 
 
@@ -454,6 +551,8 @@ def write_labelled_scan(
     score_name=None,
     ground=None,
     keep_fields=True,
+    classes_into="classification",
+    class_codes=None,
     chunk_size=1_000_000,
     overwrite=False,
 ):
@@ -573,6 +672,10 @@ def write_labelled_scan(
     {64: 'car', 65: 'tree'}
     """
     check_chunk_size(chunk_size)
+    if classes_into not in _CLASSES_INTO:
+        raise ValueError(
+            f"classes_into must be 'classification' or 'extra', got {classes_into!r}"
+        )
     class_names = [str(c) for c in class_names]
     source, output = _check_paths(source, output, overwrite)
     if _is_las(output) and len(class_names) > MAX_CLASSES:
@@ -587,12 +690,22 @@ def write_labelled_scan(
         "score": _check_array("score", score, "fiu"),
         "ground": _check_array("ground", ground, "biu"),
     }
+    codes = None
+    if _is_las(output) and classes_into == "classification":
+        codes = classification_codes(class_names, class_codes)
     if _is_las(source) and _is_las(output):
         _stream_las(
-            source, output, arrays, class_names, score_name, keep_fields, chunk_size
+            source,
+            output,
+            arrays,
+            class_names,
+            score_name,
+            keep_fields,
+            chunk_size,
+            codes,
         )
     else:
-        _in_memory(source, output, arrays, class_names, score_name, keep_fields)
+        _in_memory(source, output, arrays, class_names, score_name, keep_fields, codes)
 
 
 def read_class_names(path):

@@ -1,8 +1,7 @@
 """LAS and LAZ point clouds (the ASPRS LiDAR format), through laspy.
 
-Needs the ``las`` extra (``pip install 'skpcd[las]'``: laspy, and lazrs for
-the compressed ``.laz``); laspy is imported only when a file is read or
-written.
+Through laspy, and lazrs for the compressed ``.laz`` (both core
+dependencies); laspy is imported only when a file is read or written.
 
 Reading returns x, y, z as scaled float64 coordinates, then every other
 dimension of the point format under laspy's names (``intensity``,

@@ -32,6 +32,7 @@ __all__ = [
     "open_checked",
     "read",
     "read_las_extent",
+    "read_las_header",
     "read_vlr_records",
 ]
 
@@ -70,6 +71,19 @@ def checked_chunks(reader, path, chunk_size, n_points):
             path,
             f"truncated: the header declares {n_points} points, {n_read} could be read",
         )
+
+
+def read_las_header(path):
+    """The laspy header of a LAS/LAZ file (its VLRs and EVLRs too), once the
+    structure of the file is checked: what an output carries through
+    (:func:`~skpcd.io._las_writer.carried_header`) and what ``skpcd info``
+    shows."""
+    laspy = import_laspy()
+    path = check_file(path)
+    layout = checked_layout(path)
+    with decoding(path):
+        with open(path, "rb") as f:
+            return laspy.LasHeader.read_from(f, read_evlrs=bool(layout.evlrs))
 
 
 def read_vlr_records(path):

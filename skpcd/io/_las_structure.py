@@ -31,7 +31,10 @@ __all__ = [
     "import_laspy",
 ]
 
-_MISSING = "reading .las/.laz files needs laspy: pip install 'skpcd[las]'"
+_MISSING = (
+    "reading .las/.laz files needs laspy, a dependency of skpcd missing from "
+    "this Python environment: pip install laspy lazrs"
+)
 _BAD = "cannot read as LAS/LAZ: "
 _MIN_HEADER = {0: 227, 1: 227, 2: 227, 3: 235, 4: 375, 5: 393}
 _BASE_SIZE = (20, 28, 26, 34, 57, 63, 30, 36, 38, 59, 67)
@@ -64,7 +67,8 @@ _PARALLEL_CHUNK_BYTES = 2**27
 
 
 def import_laspy():
-    """laspy, imported now (ImportError naming the ``las`` extra without it)."""
+    """laspy, imported now (an ImportError naming laspy without it: a core
+    dependency, it is missing only from a broken environment)."""
     try:
         import laspy
     except ImportError as exc:

@@ -23,7 +23,7 @@ from skpcd.io._api import (
     write_point_cloud,
 )
 from skpcd.io._atomic import atomic_folder
-from skpcd.utils._progress import progress
+from skpcd.io._las_writer import write as write_las
 
 __all__ = [
     "SEGMENTATION_METADATA",
@@ -56,7 +56,15 @@ def is_segment_run_file(name):
 
 
 def write_segment_folder(
-    folder, segments, *, n_segments, kinds, format, metadata, overwrite=False
+    folder,
+    segments,
+    *,
+    n_segments,
+    kinds,
+    format,
+    metadata,
+    overwrite=False,
+    las_header=None,
 ):
     """Write the segments of a scene into a folder, whole or not at all.
 
@@ -81,6 +89,11 @@ def write_segment_folder(
     overwrite : bool, default=False
         Replace an earlier run's folder (never files that a run did not
         write).
+    las_header : laspy.LasHeader, default=None
+        The header of a LAS/LAZ scene, which LAS/LAZ segment files carry
+        through (version, point format, scales, offsets, CRS and other
+        VLRs; see :func:`skpcd.io._las_writer.write`). Ignored for other
+        formats.
 
     Returns
     -------
@@ -97,7 +110,11 @@ def write_segment_folder(
     with atomic_folder(folder, overwrite=overwrite, owned=is_segment_run_file) as tmp:
         for i, (seg, fields) in enumerate(segments(tmp)):
             name = f"segment_{i:0{width}d}.{format}"
-            write_point_cloud(tmp / name, seg, fields=fields or None)
+            if las_header is not None and format in ("las", "laz"):
+                xyz = {c: seg[:, j] for j, c in enumerate("xyz")}
+                write_las(tmp / name, {**xyz, **fields}, header=las_header)
+            else:
+                write_point_cloud(tmp / name, seg, fields=fields or None)
             lo, hi = seg.min(axis=0), seg.max(axis=0)
             rows.append([name, i, kinds[i], len(seg), *lo, *hi, *(hi - lo)])
         with open(tmp / SEGMENTS_SUMMARY, "w", newline="") as f:
@@ -285,6 +302,8 @@ def read_segments(
                 labels_path, f"{len(unlabelled)} file(s) have no label: {shown}"
             )
     check_segment_run(folder_or_glob, names)
+    from skpcd.utils._progress import progress  # loads scikit-learn
+
     show = None if verbose else False
     clouds, kept, skipped = [], [], []
     for f, name in zip(progress(files, desc="reading", enabled=show), names):

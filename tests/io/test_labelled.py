@@ -88,6 +88,7 @@ def test_las_copy_keeps_every_point_and_dimension(
         class_names=NAMES,
         score_name="probability",
         chunk_size=700,
+        classes_into="extra",
         **labels,
     )
     got = laspy.read(str(out))
@@ -193,7 +194,12 @@ def test_relabelling_an_output_replaces_its_dimensions(tmp_path):
     n = len(original.points)
     first = tmp_path / "first.laz"
     write_labelled_scan(
-        source, first, class_names=NAMES, score_name="similarity", **_labels(n)
+        source,
+        first,
+        class_names=NAMES,
+        score_name="similarity",
+        classes_into="extra",
+        **_labels(n),
     )
     labels = _labels(n, seed=5, n_classes=2)
     second = tmp_path / "second.las"
@@ -205,6 +211,7 @@ def test_relabelling_an_output_replaces_its_dimensions(tmp_path):
         class_index=labels["class_index"],
         score=labels["score"],
         score_name="similarity",
+        classes_into="extra",
     )
     got = laspy.read(str(second))
     extra = list(got.point_format.extra_dimension_names)
@@ -232,7 +239,12 @@ def test_lookup_entries_below_64_are_kept(tmp_path):
     las.write(str(source))
     out = tmp_path / "out.las"
     write_labelled_scan(
-        source, out, segment=[0, 1, -1], class_index=[0, 1, -1], class_names="ab"
+        source,
+        out,
+        segment=[0, 1, -1],
+        class_index=[0, 1, -1],
+        class_names="ab",
+        classes_into="extra",
     )
     (got,) = laspy.read(str(out)).header.vlrs.get("ClassificationLookupVlr")
     assert got.lookups == {2: "ground", 6: "building", 64: "a", 65: "b"}
@@ -243,7 +255,12 @@ def test_keep_fields_false_drops_the_extra_dimensions(tmp_path):
     original = _scan(source, n=100)
     out = tmp_path / "out.las"
     write_labelled_scan(
-        source, out, class_names=NAMES, keep_fields=False, **_labels(100)
+        source,
+        out,
+        class_names=NAMES,
+        keep_fields=False,
+        classes_into="extra",
+        **_labels(100),
     )
     got = laspy.read(str(out))
     assert list(got.point_format.extra_dimension_names) == [
@@ -305,7 +322,7 @@ def test_other_source_to_las_gets_the_las_layout(tmp_path):
     write_point_cloud(source, points, fields={"intensity": np.arange(50.0)})
     labels = _labels(50)
     out = tmp_path / "out.laz"
-    write_labelled_scan(source, out, class_names=NAMES, **labels)
+    write_labelled_scan(source, out, class_names=NAMES, classes_into="extra", **labels)
     got = laspy.read(str(out))
     index = labels["class_index"]
     assert np.array_equal(got["class"], np.where(index >= 0, index + 64, 0))

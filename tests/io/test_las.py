@@ -164,7 +164,8 @@ def test_missing_laspy(tmp_path, monkeypatch):
     path = tmp_path / "cloud.las"
     write_point_cloud(path, np.eye(3))
     monkeypatch.setitem(sys.modules, "laspy", None)
-    message = r"reading \.las/\.laz files needs laspy: pip install 'skpcd\[las\]'"
+    # a core dependency: the hint is laspy itself, not the old las extra
+    message = r"needs laspy, a dependency of skpcd .*: pip install laspy lazrs$"
     with pytest.raises(ImportError, match=message):
         read_point_cloud(path)
     with pytest.raises(ImportError, match=message):
