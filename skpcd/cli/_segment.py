@@ -21,6 +21,12 @@ from skpcd.cli._common import (
     side_file,
     unique_counts,
 )
+from skpcd.cli._inventory import (
+    add_inventory_option,
+    check_inventory,
+    measuring,
+    write_inventory_of,
+)
 
 KINDS = ("object", "facade", "wire")
 # The choices of --ground and --format, written out (as GROUND_PRESETS of
@@ -158,6 +164,7 @@ def add_parsers(sub):
     ident.add_argument(
         "-o", "--output", required=True, help="labelled scene (.las .laz .ply .pcd...)"
     )
+    add_inventory_option(ident)
     ident.add_argument(
         "--classes-into",
         choices=("classification", "extra"),
@@ -359,6 +366,7 @@ def run_identify(args):
     legend = check_output(
         side_file(out, "classes.csv"), args, "identify", inputs=inputs
     )
+    inventory, geometries = check_inventory(args, "identify", inputs), []
     model = load_model_for(args, "identify")
     points, _, result = segment_file(args, "identify")
     n_points = len(result.labels)
@@ -370,7 +378,9 @@ def run_identify(args):
         )
         pred, kind, seg_score, seg_sizes = identify_segments(
             model,
-            _segments(args, points, {}, result, work, fields=False),
+            measuring(
+                _segments(args, points, {}, result, work, fields=False), geometries
+            ),
             kinds=result.kinds,
             predict=lambda m, clouds: predict_or_explain(m, clouds, args, "identify"),
         )
@@ -423,6 +433,10 @@ def run_identify(args):
                 writer.writerow(
                     [j, 64 + j, c, int(mine.sum()), int(seg_sizes[mine].sum())]
                 )
+        if inventory is not None:
+            write_inventory_of(
+                args, inventory, geometries, pred, seg_score, points, result
+            )
     if not args.quiet:
         print(f"classes   {unique_counts(pred) or 'none'}")
         print(

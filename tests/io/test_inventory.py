@@ -1,0 +1,239 @@
+"""The inventory of ``skpcd identify --inventory``: the geometry of each
+object (base, size, heading, a pole's lean and what it carries), the ground
+under it, and the files (GeoPackage, GeoJSON, CSV) read back with a GIS
+library in the scan's CRS."""
+
+import csv
+import json
+import math
+import struct
+import sys
+
+import numpy as np
+import pytest
+
+from skpcd.cli import main
+from skpcd.exceptions import PointCloudFileError
+from skpcd.io._inventory import check_inventory_path, read_las_crs, write_inventory
+from skpcd.segmentation._inventory import (
+    GroundHeight,
+    object_inventory,
+    segment_geometry,
+)
+
+laspy = pytest.importorskip("laspy")
+pyogrio = pytest.importorskip("pyogrio")
+
+EPSG = 25832  # ETRS89 / UTM zone 32N
+# a street of the simulator, moved to where that CRS's coordinates are
+OFFSET = np.array([690_000.0, 5_335_000.0, 400.0])
+
+
+def _pole(lean_deg=0.0, azimuth_deg=0.0, carried_at=None, n=1500, seed=0):
+    """Points of a pole 6 m high of radius 0.06 m leaning ``lean_deg`` towards
+    ``azimuth_deg``, with a plate 0.6 m wide from ``carried_at`` to 0.5 m
+    higher (measured along the pole)."""
+    rng = np.random.default_rng(seed)
+    t = rng.uniform(0, 6, n)
+    a = rng.uniform(0, 2 * np.pi, n)
+    shaft = np.column_stack([0.06 * np.cos(a), 0.06 * np.sin(a), t])
+    parts = [shaft]
+    if carried_at is not None:
+        u = rng.uniform(-0.3, 0.3, n // 2)
+        h = rng.uniform(carried_at, carried_at + 0.5, n // 2)
+        parts.append(np.column_stack([u, np.full(n // 2, 0.08), h]))
+    points = np.vstack(parts)
+    lean, az = np.radians(lean_deg), np.radians(azimuth_deg)
+    # tilt about the horizontal axis perpendicular to the azimuth
+    tilt = np.array([np.sin(lean) * np.cos(az), np.sin(lean) * np.sin(az)])
+    points[:, :2] += np.outer(points[:, 2], tilt)
+    points[:, 2] *= np.cos(lean)
+    return points + np.array([10.0, 20.0, 3.0])
+
+
+def test_pole_lean_and_carried_height():
+    g = segment_geometry(
+        _pole(lean_deg=5.0, azimuth_deg=30.0, carried_at=2.2), pole=True
+    )
+    assert abs(g["lean"] - 5.0) < 0.5
+    assert abs(g["carried_height"] - 2.2 * math.cos(math.radians(5))) < 0.12
+    assert abs(g["x"] - 10.0) < 0.1 and abs(g["y"] - 20.0) < 0.1
+    upright = segment_geometry(_pole(carried_at=3.0, seed=1), pole=True)
+    assert upright["lean"] < 0.7
+    assert abs(upright["carried_height"] - 3.0) < 0.12
+    bare = segment_geometry(_pole(lean_deg=2.0, seed=2), pole=True)
+    assert abs(bare["lean"] - 2.0) < 0.5
+    assert math.isnan(bare["carried_height"])
+    # not measured as a pole
+    assert math.isnan(segment_geometry(_pole(seed=3))["lean"])
+
+
+def test_footprint_of_a_rotated_box():
+    rng = np.random.default_rng(0)
+    box = rng.uniform([-2.0, -0.9, 0.0], [2.0, 0.9, 1.5], (3000, 3))
+    angle = np.radians(30.0)  # long side 30 degrees anticlockwise from +x
+    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    box[:, :2] = box[:, :2] @ rot.T
+    g = segment_geometry(box)
+    assert abs(g["length"] - 4.0) < 0.05 and abs(g["width"] - 1.8) < 0.05
+    # 30 degrees from east is 60 degrees clockwise from north
+    assert abs(g["heading"] - 60.0) < 1.0
+
+
+def test_base_on_the_ground_under_the_object():
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(0, 30, (20000, 2))
+    ground = np.column_stack([xy, 0.05 * xy[:, 0] + 100.0])
+    # a sign whose plate hangs from 2 m: its lowest point is off the ground
+    plate = np.column_stack(
+        [rng.uniform(9.7, 10.3, 300), np.full(300, 5.0), rng.uniform(102.5, 103.0, 300)]
+    )
+    pole = _pole(carried_at=2.0, seed=4) + np.array([0, 0, 97.5])  # on z 100.5
+    geoms = [segment_geometry(plate, pole=True), segment_geometry(pole, pole=True)]
+    table = object_inventory(
+        geoms, ["traffic_sign", "pole"], [0.4, 0.9], ground=GroundHeight().fit(ground)
+    )
+    np.testing.assert_allclose(table["z"], [100.5, 100.5], atol=0.05)
+    np.testing.assert_allclose(table["height"], [2.5, 6.0], atol=0.05)
+    assert abs(table["carried_height"][1] - 2.0) < 0.12
+    assert table["class"].tolist() == ["traffic_sign", "pole"]
+    # without ground: the base is the lowest point
+    alone = object_inventory(geoms, ["traffic_sign", "car"])
+    np.testing.assert_allclose(alone["z"][0], 102.5, atol=0.01)
+    assert math.isnan(alone["lean"][1])  # a car is not measured as a pole
+
+
+def _geokeys(epsg):
+    """A GeoKeyDirectory record naming a projected CRS by its EPSG code."""
+    keys = [1, 1, 0, 2, 1024, 0, 1, 1, 3072, 0, 1, epsg]
+    return struct.pack(f"<{len(keys)}H", *keys)
+
+
+def _street_las(path, crs_record):
+    from skpcd.datasets import make_street_scene
+
+    scene = make_street_scene(30, scanner="spinning", random_state=3)
+    points = scene.points + OFFSET
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.offsets = points.min(axis=0)
+    header.scales = [0.001] * 3
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = points.T
+    if crs_record is not None:
+        record_id, data = crs_record
+        las.vlrs.append(
+            laspy.VLR(user_id="LASF_Projection", record_id=record_id, record_data=data)
+        )
+    las.write(path)
+    return points, scene.labels == "ground"
+
+
+@pytest.fixture(scope="module")
+def street(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("inventory")
+    scan = folder / "street.las"
+    points, is_ground = _street_las(scan, (34735, _geokeys(EPSG)))
+    return folder, scan, points, is_ground
+
+
+def test_read_las_crs(street, tmp_path):
+    _, scan, _, _ = street
+    assert read_las_crs(scan) == f"EPSG:{EPSG}"
+    text = 'PROJCS["ETRS89 / UTM zone 32N",AUTHORITY["EPSG","25832"]]'
+    other = tmp_path / "wkt.las"
+    las = laspy.LasData(laspy.LasHeader(point_format=6, version="1.4"))
+    las.x, las.y, las.z = np.zeros((3, 5))
+    las.vlrs.append(
+        laspy.VLR(
+            user_id="LASF_Projection", record_id=2112, record_data=text.encode() + b"\0"
+        )
+    )
+    las.write(other)
+    assert read_las_crs(other) == text
+    plain = tmp_path / "plain.las"
+    las = laspy.LasData(laspy.LasHeader(point_format=6, version="1.4"))
+    las.x, las.y, las.z = np.zeros((3, 5))
+    las.write(plain)
+    assert read_las_crs(plain) is None
+
+
+def test_identify_writes_inventories_in_the_scan_crs(street):
+    folder, scan, points, is_ground = street
+    n_objects = None
+    for name in ("objects.gpkg", "objects.geojson"):
+        out = folder / f"out_{name}.las"
+        inv = folder / name
+        argv = ["identify", str(scan), "-o", str(out), "--inventory", str(inv)]
+        assert main([*argv, "--quiet"]) == 0
+        info = pyogrio.read_info(inv)
+        assert info["geometry_type"] == "Point Z"
+        assert info["crs"] == f"EPSG:{EPSG}"
+        segments = laspy.read(out).segment
+        n = int(segments.max()) + 1
+        assert info["features"] == n
+        n_objects = n
+        meta, _, geometry, fields = pyogrio.raw.read(inv)
+        columns = dict(zip(meta["fields"], fields))
+        assert set(columns) >= {
+            "id",
+            "class",
+            "confidence",
+            "height",
+            "width",
+            "length",
+            "heading",
+            "n_points",
+            "lean",
+            "carried_height",
+        }
+        np.testing.assert_array_equal(
+            np.sort(columns["n_points"]), np.sort(np.bincount(segments[segments >= 0]))
+        )
+        xyz = np.array([struct.unpack("<ddd", g[-24:]) for g in geometry])
+        # each base lies on the simulated ground under it
+        ground = points[is_ground]
+        from scipy.spatial import cKDTree
+
+        _, near = cKDTree(ground[:, :2]).query(xyz[:, :2], k=20)
+        below = np.median(ground[near, 2], axis=1)
+        assert np.median(np.abs(xyz[:, 2] - below)) < 0.1
+        assert (columns["height"] > 0).all()
+    # GeoJSON read as plain JSON: the crs member GDAL takes
+    doc = json.loads((folder / "objects.geojson").read_text())
+    assert doc["crs"]["properties"]["name"] == f"urn:ogc:def:crs:EPSG::{EPSG}"
+    assert len(doc["features"]) == n_objects
+
+
+def test_csv_inventory_and_refusals(street, tmp_path, monkeypatch):
+    table = object_inventory(
+        [segment_geometry(_pole(carried_at=2.0)), segment_geometry(_pole(seed=5))],
+        ["pole", "car"],
+        [0.9, np.nan],
+    )
+    out = tmp_path / "objects.csv"
+    write_inventory(out, table)
+    with open(out, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["class"] for r in rows] == ["pole", "car"]
+    assert {"x", "y", "z"} <= set(rows[0])
+    assert rows[1]["confidence"] == "" and rows[1]["lean"] == ""
+    assert abs(float(rows[0]["x"]) - 10.0) < 0.1
+    with pytest.raises(FileExistsError):
+        write_inventory(out, table)
+    # the format from the extension, checked before any work
+    _, scan, _, _ = street
+    with pytest.raises(SystemExit, match=r"objects\.shp: .*\.gpkg, \.geojson"):
+        main(
+            [
+                "identify",
+                str(scan),
+                "-o",
+                str(tmp_path / "o.las"),
+                "--inventory",
+                str(tmp_path / "objects.shp"),
+            ]
+        )
+    assert not (tmp_path / "o.las").exists()
+    monkeypatch.setitem(sys.modules, "pyogrio", None)
+    with pytest.raises(PointCloudFileError, match=r"skpcd\[gis\]"):
+        check_inventory_path(tmp_path / "objects.gpkg")
