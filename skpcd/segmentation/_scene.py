@@ -30,6 +30,12 @@ from skpcd.segmentation._dbscan import EPS_SCALE, AutoEpsDBSCAN, estimate_eps
 from skpcd.segmentation._scan_kind import SCAN_KINDS, describe_scan, sweep_coordinates
 from skpcd.segmentation._structures import KINDS, STRUCTURE_DEFAULTS, segment_structures
 from skpcd.segmentation.ground import GROUND_PRESETS, GroundFilter
+from skpcd.segmentation.ground._classified import (
+    FROM_FILE,
+    ClassifiedGround,
+    classified_ground,
+    ground_flags,
+)
 from skpcd.segmentation.tiling._segment import segment_tiled
 from skpcd.utils._compile import entry_point
 from skpcd.utils._validation import check_scene
@@ -56,8 +62,9 @@ class SceneSegmentation(typing.NamedTuple):
         With ``ground="auto"``, what :func:`describe_scan` found the scan
         to be (which chose the ground filter); None otherwise.
     ground_filter : str or None
-        The ground preset used (a key of ``GROUND_PRESETS``), None for a
-        filter of your own or none.
+        The ground preset used (a key of ``GROUND_PRESETS``, or "from-file"
+        for a classification read from the file), None for a filter or
+        flags of your own or none.
     """
 
     labels: np.ndarray
@@ -76,7 +83,13 @@ class SceneSegmentation(typing.NamedTuple):
 @validate_params(
     {
         "points": ["array-like", str, os.PathLike],
-        "ground": [StrOptions({"auto", *GROUND_PRESETS}), GroundFilter, None],
+        "ground": [
+            StrOptions({"auto", FROM_FILE, *GROUND_PRESETS}),
+            GroundFilter,
+            ClassifiedGround,
+            "array-like",
+            None,
+        ],
         "sensor": ["array-like", None],
         "method": [StrOptions({"dbscan", "euclidean"})],
         "eps": [Interval(Real, 0, None, closed="neither"), None],
@@ -135,7 +148,8 @@ def segment_scene(
         The scene (columns beyond the third are ignored), or a point-cloud
         file. With ``tile_size``, a LAS/LAZ file is streamed in chunks
         (other formats are read whole first).
-    ground : {"auto", "street", "csf", "aerial", "mobile"}, GroundFilter or None, \
+    ground : {"auto", "street", "csf", "aerial", "mobile", "from-file"}, \
+            GroundFilter, ClassifiedGround, array-like of bool or None, \
             default="auto"
         Ground removal: a :class:`GroundFilter` with the parameters of
         ``GROUND_PRESETS[ground]`` ("csf": the cloth simulation filter,
@@ -147,7 +161,14 @@ def segment_scene(
         ``SCAN_KINDS[kind]["ground"]``: "aerial" for an airborne scan,
         "street" for the others; with ``tile_size`` the kind is told from
         a sample of the scan. The filter runs on the threads of ``n_jobs`` (one of
-        your own keeps its ``n_jobs`` unless None).
+        your own keeps its ``n_jobs`` unless None). "from-file" takes the
+        ground a scan already carries, the points of ASPRS class 2 in its
+        ``classification`` field (``points`` must then be a file; a file
+        without that field is a :class:`~skpcd.exceptions.PointCloudFileError`
+        naming it), and
+        :class:`~skpcd.segmentation.ground.ClassifiedGround` other codes
+        (``ClassifiedGround(codes=(2, 8))``); a boolean array, one flag per
+        point, gives the ground points outright.
     sensor : array-like of shape (3,) or None, default=None
         With ``ground="auto"``, the position of the sensor of a single
         sweep if known (see :func:`describe_scan`).
@@ -360,25 +381,35 @@ def segment_scene(
             points, ground, sensor, structures, (tile_size, tile_buffer, temp_folder),
             clustering,
         )  # fmt: skip
-    if isinstance(points, (str, os.PathLike)):
+    from_file = classified_ground(ground, points)
+    given = None
+    if from_file is not None:
+        points, given = from_file.read(points)
+    elif isinstance(points, (str, os.PathLike)):
         points = read_point_cloud(points)
     xyz = check_scene(points)
+    if from_file is None:
+        given = ground_flags(ground, len(xyz))
     keep = None
     if denoise is not None:
         full = len(xyz)
         keep = _inliers(xyz, denoise, n_jobs)
         xyz = np.ascontiguousarray(xyz[keep])
+        given = None if given is None else given[keep]
     scan = None
-    if ground == "auto":
+    if isinstance(ground, str) and ground == "auto":
         defaults = SCAN_KINDS["spinning"]  # too few points to tell
         if len(xyz) >= 13:
             scan = describe_scan(xyz, sensor=sensor, random_state=random_state)
             defaults = SCAN_KINDS[scan.kind]
         ground = defaults["ground"]
-    filt = _ground_filter(ground, n_jobs)
-    is_ground = (
-        np.zeros(len(xyz), dtype=bool) if filt is None else filt.fit_predict(xyz)
-    )
+    filt = None if given is not None else _ground_filter(ground, n_jobs)
+    if given is not None:
+        is_ground = given
+    else:
+        is_ground = (
+            np.zeros(len(xyz), dtype=bool) if filt is None else filt.fit_predict(xyz)
+        )
     sweep = None
     if scan is not None and eps is None and method == "dbscan":
         eps, sweep = _radius_of_kind(xyz, is_ground, scan, clustering)
@@ -386,9 +417,7 @@ def segment_scene(
         xyz, is_ground, **{**clustering, "eps": eps}, structures=structures,
         sweep=sweep,
     )  # fmt: skip
-    seg = seg._replace(
-        scan=scan, ground_filter=ground if isinstance(ground, str) else None
-    )
+    seg = seg._replace(scan=scan, ground_filter=_ground_name(ground, from_file))
     if keep is None:
         return seg
     labels = np.full(full, -1, dtype=np.int64)
@@ -419,13 +448,23 @@ def _segment_in_tiles(points, ground, sensor, structures, tiling, clustering):
     (see its Notes)."""
     tile_size, tile_buffer, temp = tiling
     scan = None
-    if ground == "auto":
+    from_file = classified_ground(ground, points)
+    given = None
+    if from_file is not None:
+        given = from_file.iter_flags(points, _GIVEN_CHUNK)
+    elif ground_flags(ground, None) is not None:
+        flags = ground_flags(ground, None)
+        given = (
+            flags[start : start + _GIVEN_CHUNK]
+            for start in range(0, len(flags), _GIVEN_CHUNK)
+        )
+    if isinstance(ground, str) and ground == "auto":
         sample = _scan_sample(points, clustering["random_state"])
         scan = describe_scan(
             sample, sensor=sensor, random_state=clustering["random_state"]
         )
         ground = SCAN_KINDS[scan.kind]["ground"]
-    filt = _ground_filter(ground, clustering["n_jobs"])
+    filt = None if given is not None else _ground_filter(ground, clustering["n_jobs"])
     if filt is not None:
         filt._validate_params()
     params = None
@@ -440,14 +479,28 @@ def _segment_in_tiles(points, ground, sensor, structures, tiling, clustering):
         tile_size=float(tile_size),
         tile_buffer=tile_buffer,
         ground=filt,
+        given_ground=given,
         structures=params,
         **{**clustering, "eps": None if eps is None else float(eps)},
         temp_folder=temp,
     )
     return SceneSegmentation(
         labels, is_ground, used, _kind_names(kinds), scan,
-        ground if isinstance(ground, str) else None,
+        _ground_name(ground, from_file),
     )  # fmt: skip
+
+
+# Ground flags given (a classification, an array) go to the tiles in
+# chunks of this many points.
+_GIVEN_CHUNK = 1_000_000
+
+
+def _ground_name(ground, from_file):
+    """``ground_filter`` of the result: the preset's name, "from-file", or
+    None."""
+    if from_file is not None:
+        return FROM_FILE
+    return ground if isinstance(ground, str) else None
 
 
 def _inliers(xyz, denoise, n_jobs):

@@ -181,13 +181,17 @@ def aligned_components(indptr, indices, mask, normal, min_cos, labels):
 
 
 @njit(cache=True, nogil=True)
-def same_label_edges(indptr, indices, labels, mask, keep):
+def same_label_edges(indptr, indices, labels, mask, keep, counts):
     """``keep[j]`` for every pair ``(i, indices[j])`` of the k-NN graph: both
-    ends masked, with the same label, and not the point itself."""
+    ends masked, with the same label, and not the point itself; ``counts[i]``
+    the pairs kept in row ``i``."""
     for i in range(len(indptr) - 1):
+        c = 0
         for j in range(indptr[i], indptr[i + 1]):
             k = indices[j]
             keep[j] = k != i and mask[i] and mask[k] and labels[i] == labels[k]
+            c += keep[j]
+        counts[i] = c
 
 
 @njit(cache=True, nogil=True)

@@ -69,9 +69,9 @@ def test_the_check_sees_a_heavy_import():
 
 
 def test_ground_choices_are_the_presets():
-    from skpcd.segmentation.ground import GROUND_PRESETS
+    from skpcd.segmentation.ground import FROM_FILE, GROUND_PRESETS
 
-    assert set(_segment.GROUND_CHOICES) == {"auto", *GROUND_PRESETS, "none"}
+    assert set(_segment.GROUND_CHOICES) == {"auto", *GROUND_PRESETS, FROM_FILE, "none"}
     assert _segment.GROUND_CHOICES[0] == "auto"
 
 

@@ -1,7 +1,7 @@
 """The parameters of :class:`~skpcd.segmentation.GroundFilter` for each kind
 of scan, in one place."""
 
-__all__ = ["GROUND_PRESETS"]
+__all__ = ["FROM_FILE", "GROUND_PRESETS"]
 
 # "aerial" are the defaults of GroundFilter (those of Pingel et al. and of
 # PDAL's filters.smrf); "mobile" SMRF for dense, low urban mobile scans;
@@ -43,3 +43,8 @@ GROUND_PRESETS = {
         "scalar": 1.25,
     },
 }
+
+# Besides the presets, ground="from-file" (--ground from-file) takes the
+# ground a scan already carries in its classification
+# (skpcd/segmentation/ground/_classified.py).
+FROM_FILE = "from-file"

@@ -218,6 +218,21 @@ def chunked_nanmedian(values, mask, chunk_size):
     return float(np.mean(middle))
 
 
+def _fill_given(is_ground, chunks):
+    """The ground flags given in chunks, copied into ``is_ground``; a
+    ValueError unless they are one per point."""
+    start = 0
+    for flags in chunks:
+        stop = start + len(flags)
+        if stop <= len(is_ground):
+            is_ground[start:stop] = flags
+        start = stop
+    if start != len(is_ground):
+        raise ValueError(
+            f"the ground flags given hold {start} values for {len(is_ground)} points"
+        )
+
+
 def windowed_filter(ground):
     """The filter the tiles run on windows of the scene's raster: SMRF, or
     with CSF (one cloth for the whole scan) the second filter of
@@ -565,6 +580,7 @@ def segment_tiled(
     tile_size,
     tile_buffer,
     ground,
+    given_ground=None,
     structures=None,
     method,
     eps,
@@ -580,11 +596,14 @@ def segment_tiled(
     """The tiled path of :func:`~skpcd.segmentation.segment_scene`.
 
     ``ground`` is a GroundFilter (the preset resolved) or None;
-    ``structures`` None or the parameters of the structures step (the
-    defaults merged); the other arguments are those of ``segment_scene``,
-    validated. Returns ``(labels, ground, eps, kinds)``: the first two as
-    memory-mapped arrays (file already unlinked on POSIX systems), the
-    kind of each segment (an index of ``KINDS``).
+    ``given_ground``, instead of a filter, the ground flags of the scan's
+    points in file order, as consecutive boolean chunks of any length (a
+    classification read from the file, flags given); ``structures`` None
+    or the parameters of the structures step (the defaults merged); the
+    other arguments are those of ``segment_scene``, validated. Returns
+    ``(labels, ground, eps, kinds)``: the first two as memory-mapped arrays
+    (file already unlinked on POSIX systems), the kind of each segment (an
+    index of ``KINDS``).
     """
     chunk_size = check_chunk_size(chunk_size)
     if method == "euclidean":
@@ -623,7 +642,9 @@ def segment_tiled(
         # 1. ground: CSF with the cloth of the whole scan; SMRF, each tile's
         # filter on the cells of its core square grown by the filter's
         # reach, cut from the raster of the whole scene
-        if ground is not None and ground.method == "csf":
+        if given_ground is not None:
+            _fill_given(is_ground, given_ground)
+        elif ground is not None and ground.method == "csf":
             bounds = _csf_tiled(scene, tiles, ground, is_ground, n_jobs)
             if ground.keep_bases:
                 _bases_tiled(
