@@ -8,11 +8,39 @@ way a command ends (:func:`skpcd.cli._common.run`).
 """
 
 import argparse
+import os
+import signal
 import sys
 
-from skpcd.cli import _describe, _evaluate, _info, _model, _review, _segment
-from skpcd.cli._common import on_cluster, run
-from skpcd.cli._evaluate import format_report
+
+def _end_before_start(signum, frame):
+    """Ctrl-C or SIGTERM before the command started: one line, nothing
+    was written."""
+    status = 143 if signum == signal.SIGTERM else 130
+    what = "terminated" if status == 143 else "interrupted"
+    os.write(2, f"skpcd: {what} before starting; nothing written\n".encode())
+    os._exit(status)
+
+
+def _is_the_command():
+    """Whether this process is the ``skpcd`` command (the console script
+    or ``python -m skpcd``), not a program importing the CLI."""
+    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+    name = os.path.basename(sys.argv[0]) if sys.argv and sys.argv[0] else ""
+    return name == "skpcd" or getattr(spec, "name", None) == "skpcd.__main__"
+
+
+# The command answers Ctrl-C and SIGTERM from its first imports on (numpy
+# and the parser are loaded below); main() takes over from here. A signal
+# ignored when the command started (a background job) stays ignored.
+if _is_the_command():
+    for _signum in (signal.SIGINT, signal.SIGTERM):
+        if signal.getsignal(_signum) is not signal.SIG_IGN:
+            signal.signal(_signum, _end_before_start)
+
+from skpcd.cli import _describe, _evaluate, _info, _model, _review, _segment  # noqa: E402
+from skpcd.cli._common import on_cluster, run, supervised  # noqa: E402
+from skpcd.cli._evaluate import format_report  # noqa: E402
 
 __all__ = ["build_parser", "format_report", "main"]
 
@@ -48,7 +76,11 @@ def main(argv=None):
     Parameters
     ----------
     argv : list of str, default=None
-        Arguments; ``sys.argv[1:]`` when None.
+        Arguments; ``sys.argv[1:]`` when None. When None (the ``skpcd``
+        command itself) the work runs in a child process, so that Ctrl-C
+        and SIGTERM end the command within a second whatever it is doing
+        (:func:`skpcd.cli._common.supervised`); with ``argv`` given it
+        runs in this process.
 
     Returns
     -------
@@ -60,9 +92,12 @@ def main(argv=None):
         shell).
     """
     args = build_parser().parse_args(argv)
+    func = args.func
     if getattr(args, "scheduler", None):
-        return run(args.command, lambda a: on_cluster(a, a.func), args)
-    return run(args.command, args.func, args)
+        func = lambda a: on_cluster(a, args.func)  # noqa: E731
+    if argv is None:
+        return supervised(args.command, lambda: run(args.command, func, args))
+    return run(args.command, func, args)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -2,6 +2,10 @@
 labelled folders, and the way a command ends (errors, warnings, interrupts).
 """
 
+import contextlib
+import functools
+import os
+import re
 import signal
 import sys
 import warnings
@@ -12,7 +16,10 @@ import numpy as np
 from skpcd.exceptions import PointCloudFileError
 
 # What --quiet silences.
-QUIET_HELP = "no progress bars, no line saying that numba kernels compile"
+QUIET_HELP = (
+    "print only errors and warnings: no progress, no line saying that numba "
+    "kernels compile, and no summary of what was written to the output"
+)
 
 # Seconds to wait for a Dask scheduler before giving up.
 SCHEDULER_TIMEOUT = 10
@@ -25,61 +32,329 @@ class CommandError(SystemExit):
         super().__init__(f"skpcd {command}: {message}")
 
 
-class Terminated(BaseException):
+class Terminated(KeyboardInterrupt):
     """SIGTERM, raised in the main thread so that every ``finally`` (the
-    atomic outputs' clean-up among them) runs, as for Ctrl-C."""
+    atomic outputs' clean-up among them) runs, as for Ctrl-C. A
+    KeyboardInterrupt, so that code letting Ctrl-C through (a reader's
+    error wrapping) lets it through too."""
 
 
-def _raise_terminated(signum, frame):
-    raise Terminated(signum)
+# seconds the work process has, after an interrupt, to clean up and end
+# by itself before it is killed (and its partial outputs removed for it)
+GRACE = 0.5
+
+# keyword of the library -> (attribute of the command's arguments, option)
+_OPTIONS = {
+    "overwrite": ("overwrite", "--overwrite"),
+    "ground": ("ground", "--ground"),
+    "structures": ("structures", "--no-structures"),
+    "tile_size": ("tile_size", "--tile-size"),
+    "tile_buffer": ("tile_buffer", "--tile-buffer"),
+    "eps": ("eps", "--eps"),
+    "eps_scale": ("eps_scale", "--eps-scale"),
+    "min_samples": ("min_samples", "--min-samples"),
+    "min_cluster_size": ("min_size", "--min-size"),
+    "max_cluster_size": ("max_size", "--max-size"),
+    "n_jobs": ("n_jobs", "--n-jobs"),
+    "keep_fields": ("keep_fields", "--keep-fields"),
+    "random_state": ("random_state", "--random-state"),
+    "sensor": ("sensor", "--sensor"),
+    "method": ("method", "--method"),
+    "trust_pickle": ("trust_pickle", "--trust-pickle"),
+    "skip_unreadable": ("skip_unreadable", "--skip-unreadable"),
+}
+_KEYWORD = re.compile(
+    r"\b(?P<name>[a-z][a-z_]*)=(?P<value>'[^']*'|\"[^\"]*\"|-?[\w.]*\w)"
+)
+_PARAMETER = re.compile(r"\bThe '(?P<name>\w+)' parameter of \w+")
+_BARE = re.compile(r"\b(?P<name>[a-z]+_[a-z_]+)\b(?!=)")
 
 
-def _show_warning(message, category, filename, lineno, file=None, line=None):
-    """Warnings as one line, without the Python source line."""
-    print(f"skpcd: warning: {message}", file=file or sys.stderr)
+def cli_spelling(message, args):
+    """``message`` of the library with its keyword arguments spelled as
+    the options of the command ``args`` was parsed for.
+
+    ``pass overwrite=True`` becomes ``pass --overwrite``, ``ground='mobile'``
+    ``--ground mobile``, ``structures=False`` ``--no-structures``,
+    ``tile_size`` ``--tile-size``, "The 'eps' parameter of segment_scene"
+    "The --eps option"; a keyword the command has no option for is left
+    as it is.
+    """
+
+    def option(name):
+        dest, flag = _OPTIONS.get(name, (None, None))
+        return flag if dest is not None and hasattr(args, dest) else None
+
+    def keyword(match):
+        flag = option(match["name"])
+        if flag is None:
+            return match[0]
+        value = match["value"].strip("'\"")
+        if flag.startswith("--no-"):
+            return flag if value == "False" else f"no {flag}"
+        if value in ("True", "False"):
+            return flag if value == "True" else f"no {flag}"
+        return f"{flag} {value}"
+
+    def parameter(match):
+        flag = option(match["name"])
+        return match[0] if flag is None else f"The {flag} option"
+
+    def bare(match):
+        return option(match["name"]) or match[0]
+
+    message = _KEYWORD.sub(keyword, str(message))
+    message = _PARAMETER.sub(parameter, message)
+    return _BARE.sub(bare, message)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None, *, args):
+    """Warnings as one line, without the Python source line, in the
+    command's spelling."""
+    print(f"skpcd: warning: {cli_spelling(message, args)}", file=file or sys.stderr)
+
+
+def _catchable():
+    """SIGINT and SIGTERM, but not one ignored when the command started
+    (``nohup``, a background job of a script): that one stays ignored."""
+    return [
+        signum
+        for signum in (signal.SIGINT, signal.SIGTERM)
+        if signal.getsignal(signum) is not signal.SIG_IGN
+    ]
+
+
+def interrupt_line(command, signum):
+    """The line that ends an interrupted command, and its status."""
+    if signum == signal.SIGTERM:
+        return f"skpcd {command}: terminated; no partial output left", 143
+    return f"skpcd {command}: interrupted; no partial output left", 130
 
 
 def run(command, func, args):
     """Run ``func(args)`` as the command ``command``.
 
     Bad input files end with one line on stderr and status 1; an output
-    that cannot be written (full disk, no permission) likewise; Ctrl-C and
-    SIGTERM end with one line and status 130 / 143, after the partial
-    outputs are removed. A first run that compiles numba kernels says so on
-    stderr, once (:func:`~skpcd.utils._compile.compile_notice`; not with
-    ``--quiet``).
+    that cannot be written (full disk, no permission) likewise, naming the
+    output; Ctrl-C and SIGTERM end with one line and status 130 / 143,
+    after the partial outputs are removed (a second signal while they are
+    removed is ignored). Messages of the library name the command's options
+    (:func:`cli_spelling`). A first run that compiles numba kernels says so
+    on stderr, once (:func:`~skpcd.utils._compile.compile_notice`); long
+    stages draw progress on a terminal. ``--quiet`` silences both.
     """
-    from skpcd.utils._compile import compile_notice  # imports numba: not for --help
+    from skpcd._interrupts import interrupt
 
-    previous = signal.getsignal(signal.SIGTERM)
+    received = []
+
+    def on_signal(signum, frame):
+        if received:  # already ending: let the clean-up finish
+            return
+        received.append(signum)
+        interrupt(
+            Terminated(signum) if signum == signal.SIGTERM else KeyboardInterrupt()
+        )
+
     in_main = _is_main_thread()
+    previous = {}
     if in_main:
-        signal.signal(signal.SIGTERM, _raise_terminated)
+        for signum in _catchable():
+            previous[signum] = signal.signal(signum, on_signal)
     try:
+        # numba, tqdm: imported here, not for --help
+        from skpcd.utils._compile import compile_notice
+        from skpcd.utils._progress import reporting, silenced
+
         quiet = bool(getattr(args, "quiet", False))
-        with warnings.catch_warnings(), compile_notice(f"skpcd {command}", quiet=quiet):
-            warnings.showwarning = _show_warning
+        # a command writing its result to -o prints only a summary: not with
+        # --quiet (evaluate's report, its result, stays)
+        summary = quiet and getattr(args, "output", None) is not None
+        with (
+            warnings.catch_warnings(),
+            compile_notice(f"skpcd {command}", quiet=quiet),
+            silenced(quiet),
+            reporting(),
+            _no_stdout(summary),
+        ):
+            warnings.showwarning = functools.partial(_show_warning, args=args)
             return func(args)
+    except CommandError as exc:
+        exc.code = cli_spelling(exc.code, args)
+        raise
     except (PointCloudFileError, FileExistsError) as exc:
-        print(f"skpcd {command}: error: {exc}", file=sys.stderr)
+        print(f"skpcd {command}: error: {cli_spelling(exc, args)}", file=sys.stderr)
         return 1
     except OSError as exc:  # writing: full disk, permissions, ...
-        where = f" {exc.filename}" if exc.filename else ""
+        where = f" {exc.filename}:" if exc.filename else ""
         print(
             f"skpcd {command}: error:{where} {exc.strerror or exc}; nothing was "
             "written in its place",
             file=sys.stderr,
         )
         return 1
-    except KeyboardInterrupt:
-        print(f"skpcd {command}: interrupted; no partial output left", file=sys.stderr)
-        return 130
-    except Terminated:
-        print(f"skpcd {command}: terminated; no partial output left", file=sys.stderr)
-        return 143
+    except KeyboardInterrupt as exc:
+        line, status = interrupt_line(
+            command, signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT
+        )
+        print(line, file=sys.stderr)
+        return status
     finally:
-        if in_main:
-            signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+@contextlib.contextmanager
+def _no_stdout(active):
+    """Standard output thrown away while ``active``."""
+    if not active:
+        yield
+        return
+    with open(os.devnull, "w") as devnull, contextlib.redirect_stdout(devnull):
+        yield
+
+
+class _Stop(BaseException):
+    """The supervising process received SIGINT or SIGTERM."""
+
+
+def supervised(command, work):
+    """``work()`` run in a child process, answered within a second on
+    Ctrl-C or SIGTERM whatever the child is doing.
+
+    The child does the work (``work()``'s return value is its status) and
+    records its temporary outputs in a journal
+    (:mod:`skpcd._interrupts`). On SIGINT or SIGTERM this process passes the
+    signal on and waits :data:`GRACE` seconds for the child to clean up and
+    end; a child still busy (in the C++ cloth simulation, a numba kernel)
+    is killed, its temporary outputs are removed from the journal, and one
+    line says so. Temporary files of the child in the default temporary
+    folder go too: it gets a folder of its own. A child that dies of
+    anything else (a crash) is reported in one line, status 1. Without
+    ``os.fork`` (Windows) the work runs in this process.
+
+    Returns
+    -------
+    status : int
+        The child's status; 130 or 143 when interrupted.
+    """
+    if not hasattr(os, "fork"):  # pragma: no cover - POSIX CI
+        return work()
+    import tempfile
+
+    caught = []
+
+    def on_signal(signum, frame):
+        caught.append(signum)
+        if len(caught) == 1:
+            raise _Stop
+
+    journal = tempfile.TemporaryFile(prefix="skpcd-journal-")
+    scratch = tempfile.mkdtemp(prefix="skpcd-run-")
+    catchable = _catchable()
+    for signum in catchable:
+        signal.signal(signum, on_signal)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    try:
+        pid = os.fork()
+        if pid == 0:
+            _child(work, journal.fileno(), scratch, catchable)
+        try:
+            status = os.waitpid(pid, 0)[1]
+        except _Stop:
+            status = _stop(pid, caught[0])
+    except _Stop:  # before the child was started
+        status = None
+    try:
+        return _outcome(command, status, caught)
+    finally:
+        _remove_partials(journal, scratch)
+
+
+def _child(work, journal_fd, scratch, catchable):
+    """The work process: ``work()``, then exit at once with its status
+    (no interpreter teardown while numba's or joblib's threads run)."""
+    import tempfile
+    import traceback
+
+    from skpcd import _interrupts
+
+    status = 1
+    try:
+        for signum in catchable:
+            signal.signal(signum, signal.default_int_handler)
+        _interrupts.start_journal(journal_fd)
+        tempfile.tempdir = scratch
+        os.environ["TMPDIR"] = scratch
+        status = work()
+    except SystemExit as exc:  # CommandError and argparse's own
+        if exc.code is None or isinstance(exc.code, int):
+            status = exc.code or 0
+        else:
+            print(exc.code, file=sys.stderr)
+            status = 1
+    except (KeyboardInterrupt, _Stop):  # before run() took over the signals
+        status = 1  # silent: the supervising process says it
+    except BaseException:
+        traceback.print_exc()
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(status)
+
+
+def _stop(pid, signum):
+    """Pass ``signum`` on to the child, give it :data:`GRACE` seconds to
+    end, then kill it; returns its wait status."""
+    import time
+
+    with contextlib.suppress(ProcessLookupError):
+        os.kill(pid, signum)
+    deadline = time.monotonic() + GRACE
+    while time.monotonic() < deadline:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            return status
+        time.sleep(0.01)
+    with contextlib.suppress(ProcessLookupError):
+        os.kill(pid, signal.SIGKILL)
+    return os.waitpid(pid, 0)[1]
+
+
+def _outcome(command, status, caught):
+    """The command's status from the child's wait status, with the line
+    the child could not print itself."""
+    code = None if status is None else os.waitstatus_to_exitcode(status)
+    if caught:
+        line, expected = interrupt_line(command, caught[0])
+        if code in (130, 143):  # the child ended by itself and said so
+            return code
+        print(line, file=sys.stderr)
+        return expected
+    if code < 0:
+        name = signal.Signals(-code).name
+        print(
+            f"skpcd {command}: error: the work process died ({name}); no partial "
+            "output left",
+            file=sys.stderr,
+        )
+        return 1
+    return code
+
+
+def _remove_partials(journal, scratch):
+    """Remove what the journal names (newest first) and the child's
+    temporary folder."""
+    import shutil
+
+    from skpcd._interrupts import discard, journal_entries
+
+    for entry in reversed(journal_entries(journal.fileno())):
+        with contextlib.suppress(OSError):
+            discard(entry)
+    journal.close()
+    shutil.rmtree(scratch, ignore_errors=True)
 
 
 def _is_main_thread():
@@ -142,8 +417,9 @@ def add_skip_unreadable(parser):
 
 def check_output(path, args, command, *, inputs=()):
     """The output file ``path``, refused before any work when it exists
-    without ``--overwrite``, is a folder, lies in no folder, or is one of
-    ``inputs`` (whatever the flags)."""
+    without ``--overwrite``, is a folder, lies in no folder, is one of
+    ``inputs`` (whatever the flags), or cannot be written (a read-only
+    folder, a full disk: an OSError naming it)."""
     out = Path(path)
     if out.is_dir():
         raise CommandError(command, f"{out} is a folder; give a file name")
@@ -154,6 +430,9 @@ def check_output(path, args, command, *, inputs=()):
     check_not_an_input(out, command, inputs)
     if out.exists() and not args.overwrite:
         raise CommandError(command, f"{out} exists; pass --overwrite to replace it")
+    from skpcd.io._atomic import check_writable
+
+    check_writable(out)
     return out
 
 

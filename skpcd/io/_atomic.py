@@ -5,15 +5,29 @@ Every file skpcd writes goes through :func:`atomic_path` (one file) or
 written beside its final name, under a hidden name that no reader of skpcd
 takes for a result, and renamed into place only when complete. An exception,
 Ctrl-C or SIGTERM (the CLI turns it into an exception) removes the partial
-output and leaves what was there before untouched.
+output and leaves what was there before untouched; every temporary name is
+also recorded in the journal of :mod:`skpcd._interrupts`, so that the
+``skpcd`` command removes it even when its work process is killed.
+:func:`check_writable` finds an output that cannot be written before any
+work; an error while writing names the final output, not the temporary one.
 """
 
 import contextlib
 import os
-import shutil
+import tempfile
 from pathlib import Path
 
-__all__ = ["PARTIAL_MARK", "atomic_folder", "atomic_path", "check_folder_output"]
+from skpcd._interrupts import deferred, discard, note
+from skpcd.exceptions import PointCloudFileError
+
+__all__ = [
+    "PARTIAL_MARK",
+    "atomic_folder",
+    "atomic_path",
+    "check_folder_output",
+    "check_writable",
+    "scratch_folder",
+]
 
 # part of the name of every temporary output (files and folders)
 PARTIAL_MARK = ".skpcd-partial-"
@@ -60,12 +74,65 @@ def atomic_path(path, *, overwrite=False):
             f"{path}: the file exists; pass overwrite=True to replace it."
         )
     tmp = _partial_name(path)
+    entry = note("file", tmp)
     try:
-        yield tmp
-        os.replace(tmp, path)
+        with _naming(path, tmp):
+            yield tmp
+            os.replace(tmp, path)
     finally:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
+        with deferred():
+            discard(entry)
+
+
+@contextlib.contextmanager
+def _naming(path, tmp):
+    """An OSError about the temporary ``tmp`` (or about no file: a full
+    disk) raised as one about the output ``path``."""
+    try:
+        yield
+    except OSError as exc:
+        name = exc.filename
+        if isinstance(exc, PointCloudFileError) or (
+            name is not None and not str(name).startswith(str(tmp))
+        ):
+            raise
+        raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from exc
+
+
+def check_writable(path):
+    """Check, before any work, that the output ``path`` can be written.
+
+    A temporary file is created where the output's temporary name will be
+    (for a folder that does not exist yet: in the nearest folder that
+    does), a byte written to it, and the file removed.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The output, a file or a folder.
+
+    Raises
+    ------
+    OSError
+        Naming ``path``: a read-only folder, a full disk, a parent that
+        is a file...
+    """
+    path = Path(os.fspath(path))
+    where = path.parent
+    while not where.exists() and where != where.parent:
+        where = where.parent
+    probe = where / f"{PARTIAL_MARK}{os.getpid()}-probe-{path.name}"
+    entry = note("file", probe)
+    try:
+        with _naming(path, probe):
+            fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+            try:
+                os.write(fd, b"\0")
+            finally:
+                os.close(fd)
+    finally:
+        with deferred():
+            discard(entry)
 
 
 def check_folder_output(path, *, overwrite=False, owned=None):
@@ -132,12 +199,42 @@ def atomic_folder(path, *, overwrite=False, owned=None):
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = _partial_name(path)
     old = path.with_name(f"{PARTIAL_MARK}{os.getpid()}-old-{path.name}")
-    tmp.mkdir()
+    entry = note("folder", tmp, final=path, old=old)
     try:
-        yield tmp
-        if path.is_dir():
-            os.replace(path, old)
-        os.replace(tmp, path)
+        with _naming(path, tmp):
+            tmp.mkdir()
+            yield tmp
+            with deferred():  # both renames, or neither
+                if path.is_dir():
+                    os.replace(path, old)
+                os.replace(tmp, path)
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-        shutil.rmtree(old, ignore_errors=True)
+        with deferred():
+            discard(entry)
+
+
+@contextlib.contextmanager
+def scratch_folder(parent):
+    """A hidden folder in ``parent`` for the intermediate files of a run,
+    removed when the block ends (and by the ``skpcd`` command when its work
+    process is killed).
+
+    Parameters
+    ----------
+    parent : str or path-like
+        Where to create it: beside the output, on the same disk.
+
+    Yields
+    ------
+    folder : pathlib.Path
+        The empty folder.
+    """
+    folder = Path(
+        tempfile.mkdtemp(prefix=f"{PARTIAL_MARK}{os.getpid()}-work-", dir=parent)
+    )
+    entry = note("folder", folder)
+    try:
+        yield folder
+    finally:
+        with deferred():
+            discard(entry)

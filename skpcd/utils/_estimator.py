@@ -26,6 +26,7 @@ from sklearn.base import BaseEstimator, TransformerMixin, _fit_context
 
 from skpcd.utils._compile import entry_point
 from skpcd.utils._parallel import map_batches
+from skpcd.utils._progress import stage
 from skpcd.utils._validation import check_point_clouds, check_scene
 
 __all__ = ["CloudTransformer", "SceneEstimator"]
@@ -163,5 +164,9 @@ class SceneEstimator(BaseEstimator):
         self : object
             The fitted estimator.
         """
-        self._fit(check_scene(X, self, min_points=self._min_points()))
+        xyz = check_scene(X, self, min_points=self._min_points())
+        method = getattr(self, "method", None)
+        name = type(self).__name__ + (f" ({method})" if method else "")
+        with stage(name):  # on the command's terminal only
+            self._fit(xyz)
         return self

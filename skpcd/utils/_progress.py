@@ -1,13 +1,35 @@
-"""A minimal progress bar on standard error, silent when not on a terminal."""
+"""Progress on standard error (tqdm): bars for loops, timers for stages.
 
+Both draw only on a terminal, and never while :func:`silenced` is active
+(the ``skpcd`` command's ``--quiet``). :func:`stage` reports a step that has
+no items to count (reading a scene, the ground filter); the library marks
+its long steps with it, and they show only inside :func:`reporting` (the
+``skpcd`` command turns it on), so that a script calling the library sees
+nothing it did not ask for.
+"""
+
+import contextlib
 import sys
-import time
+import threading
 
-__all__ = ["progress"]
+__all__ = ["progress", "reporting", "silenced", "stage"]
+
+# seconds between two redraws of a stage's elapsed time
+_TICK = 0.5
+# set by reporting() and silenced()
+_state = {"report": False, "silent": False}
+
+
+def _enabled(enabled, stream):
+    if _state["silent"]:
+        return False
+    if enabled is None:
+        return hasattr(stream, "isatty") and stream.isatty()
+    return bool(enabled)
 
 
 def progress(iterable, *, total=None, desc="", enabled=None, stream=None):
-    """Yield from ``iterable`` while drawing a one-line progress bar.
+    """Iterate over ``iterable`` while drawing a progress bar with its ETA.
 
     Parameters
     ----------
@@ -19,43 +41,97 @@ def progress(iterable, *, total=None, desc="", enabled=None, stream=None):
         Label printed before the bar.
     enabled : bool, default=None
         Draw the bar. None draws it only when ``stream`` is a terminal.
+        Never drawn inside :func:`silenced`.
+    stream : file-like, default=None
+        Where to draw; standard error by default.
+
+    Returns
+    -------
+    iterator
+        The items of ``iterable``, unchanged.
+    """
+    stream = sys.stderr if stream is None else stream
+    if not _enabled(enabled, stream):
+        return iter(iterable)
+    from tqdm import tqdm
+
+    return tqdm(
+        iterable, total=total, desc=desc, file=stream, mininterval=0.2, leave=True
+    )
+
+
+@contextlib.contextmanager
+def stage(desc, *, enabled=None, stream=None):
+    """Report a step without items to count: its name and elapsed time.
+
+    Parameters
+    ----------
+    desc : str
+        What the step does, e.g. ``"ground (csf)"``.
+    enabled : bool, default=None
+        Draw. None draws only inside :func:`reporting` and when ``stream``
+        is a terminal. Never drawn inside :func:`silenced`.
     stream : file-like, default=None
         Where to draw; standard error by default.
 
     Yields
     ------
-    item
-        The items of ``iterable``, unchanged.
+    None
+        The elapsed time is redrawn every half second while the step runs
+        Python or numba code (a C extension that keeps the interpreter
+        busy, such as the cloth simulation, freezes it until it returns);
+        the line is erased when the step ends. Drawn from the main thread
+        only (not by tiles run in threads).
     """
     stream = sys.stderr if stream is None else stream
-    if enabled is None:
-        enabled = hasattr(stream, "isatty") and stream.isatty()
-    if not enabled:
-        yield from iterable
+    if enabled is None and not _state["report"]:
+        enabled = False
+    main = threading.current_thread() is threading.main_thread()
+    if not main or not _enabled(enabled, stream):
+        yield
         return
-    if total is None and hasattr(iterable, "__len__"):
-        total = len(iterable)
-    start = time.perf_counter()
-    last = 0.0
-    done = 0
+    from tqdm import tqdm
 
-    def draw(final=False):
-        elapsed = time.perf_counter() - start
-        if total:
-            filled = int(30 * done / total)
-            bar = "#" * filled + "-" * (30 - filled)
-            stream.write(f"\r{desc} [{bar}] {done}/{total} {elapsed:5.1f}s")
-        else:
-            stream.write(f"\r{desc} {done} {elapsed:5.1f}s")
-        if final:
-            stream.write("\n")
-        stream.flush()
+    bar = tqdm(
+        total=None,
+        desc=desc,
+        file=stream,
+        bar_format="{desc}: {elapsed}",
+        leave=False,
+    )
+    stop = threading.Event()
 
-    for item in iterable:
-        yield item
-        done += 1
-        now = time.perf_counter()
-        if now - last > 0.1:
-            draw()
-            last = now
-    draw(final=True)
+    def tick():
+        while not stop.wait(_TICK):
+            bar.refresh()
+
+    ticker = threading.Thread(target=tick, name="skpcd-stage", daemon=True)
+    ticker.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        ticker.join()
+        bar.close()
+
+
+@contextlib.contextmanager
+def reporting():
+    """Show the library's :func:`stage` steps (on a terminal)."""
+    before = _state["report"]
+    _state["report"] = True
+    try:
+        yield
+    finally:
+        _state["report"] = before
+
+
+@contextlib.contextmanager
+def silenced(active=True):
+    """Draw no bar and no stage while active (``--quiet``)."""
+    before = _state["silent"]
+    _state["silent"] = before or bool(active)
+    try:
+        yield
+    finally:
+        _state["silent"] = before

@@ -20,19 +20,20 @@ from skpcd.cli import _evaluate, _segment
 from skpcd.cli._common import run
 from skpcd.utils._compile import QUIET_ENV, STAGES
 
-# Runs the command as ``python -m skpcd`` does (its exit status kept), then
-# prints on stderr the top-level packages it loaded.
+# Runs the command in this process (its exit status kept; ``python -m
+# skpcd`` would run the work in a child process), then prints on stderr the
+# top-level packages it loaded.
 _LOADED = """
-import json, runpy, sys
-sys.argv = ["skpcd", *sys.argv[1:]]
+import json, sys
+from skpcd.cli import main
 try:
-    runpy.run_module("skpcd", run_name="__main__", alter_sys=True)
+    sys.exit(main(sys.argv[1:]))
 finally:
     top = sorted({name.split(".")[0] for name in sys.modules})
     print("LOADED " + json.dumps(top), file=sys.stderr)
 """
 
-HEAVY = ("sklearn", "numba", "scipy", "pandas", "joblib", "laspy")
+HEAVY = ("sklearn", "numba", "scipy", "pandas", "joblib", "laspy", "tqdm")
 
 COMMANDS = ("info", "evaluate", "score", "fit", "predict", "describe", "segment")
 
