@@ -33,7 +33,7 @@ KINDS = ("object", "facade", "wire")
 # skpcd.segmentation.ground and SEGMENT_FORMATS of skpcd.io._segment_folder
 # have them, tests/cli/test_startup.py checks) so that building the parser
 # loads no library: ``skpcd --help`` imports neither scikit-learn nor numba.
-GROUND_CHOICES = ("auto", "street", "csf", "aerial", "mobile", "none")
+GROUND_CHOICES = ("auto", "street", "csf", "aerial", "mobile", "from-file", "none")
 SEGMENT_FORMATS = ("ply", "pcd", "las", "laz", "xyz", "txt", "csv", "npy")
 
 
@@ -47,7 +47,16 @@ def add_segmentation_options(p):
         "scan is (aerial for an airborne tile, street for the others; said on "
         "stderr); street, the cloth simulation filter with the bases of objects "
         "given back; csf, the cloth simulation filter alone; aerial or mobile, "
-        "SMRF; or none (default auto)",
+        "SMRF; from-file, the ground the scan already carries in its "
+        "classification (class 2, or --ground-codes); or none (default auto)",
+    )
+    p.add_argument(
+        "--ground-codes",
+        type=ground_codes,
+        default=(2,),
+        metavar="CODES",
+        help="with --ground from-file, the classification codes of ground "
+        "points, comma-separated (default 2, ASPRS ground; e.g. 2,8)",
     )
     p.add_argument(
         "--sensor",
@@ -114,6 +123,22 @@ def add_segmentation_options(p):
     add_n_jobs(p)
     add_output_options(p)
     add_scheduler(p)
+
+
+def ground_codes(text):
+    """The value of ``--ground-codes``: integers 0 to 255, comma-separated."""
+    import argparse
+
+    try:
+        codes = tuple(int(t) for t in text.split(","))
+    except ValueError:
+        codes = ()
+    if not codes or not all(0 <= c <= 255 for c in codes):
+        raise argparse.ArgumentTypeError(
+            f"expected classification codes 0 to 255, comma-separated (2,8), "
+            f"got {text!r}"
+        )
+    return codes
 
 
 def add_parsers(sub):
@@ -193,13 +218,22 @@ def segment_file(args, command, fields=None):
 
     tiled = args.tile_size is not None
     finite = None
+    ground = None if args.ground == "none" else args.ground
+    if ground == "from-file":
+        from skpcd.segmentation.ground import ClassifiedGround
+
+        ground = ClassifiedGround(args.ground_codes)
     if tiled:
         points, extras, source = None, {}, args.scene
     else:
-        read = read_point_cloud(args.scene, fields=fields, nonfinite="keep")
-        points, extras = read if fields else (read, {})
+        want = "all" if fields or args.ground == "from-file" else None
+        read = read_point_cloud(args.scene, fields=want, nonfinite="keep")
+        points, extras = read if want else (read, {})
         finite = np.isfinite(points).all(axis=1)
         source = points if finite.all() else points[finite]
+        if args.ground == "from-file":  # the flags of the points read
+            ground = ground.flags_of(args.scene, extras)[finite]
+            extras = extras if fields else {}
     tiling = (
         {"tile_size": args.tile_size, "tile_buffer": args.tile_buffer} if tiled else {}
     )
@@ -207,7 +241,7 @@ def segment_file(args, command, fields=None):
     try:
         result = segment_scene(
             source,
-            ground=None if args.ground == "none" else args.ground,
+            ground=ground,
             sensor=args.sensor,
             method=args.method,
             eps=args.eps,
