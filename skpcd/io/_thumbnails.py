@@ -97,14 +97,15 @@ def encode_png(indices, palette=HEIGHT_PALETTE, *, transparent=0):
     return b"".join(parts)
 
 
-def _rasterise(u, v, key, colour, size, splat):
-    """Pixels at ``(u, v)`` (v up), equal scales on both axes, the point of
-    highest ``key`` drawn where several fall in one pixel."""
+def _rasterise(u, v, key, colour, size, splat, span):
+    """Pixels at ``(u, v)`` (v up), ``span`` metres across the image on both
+    axes, centred, the point of highest ``key`` drawn where several fall in
+    one pixel."""
     image = np.zeros((size, size), dtype=np.uint8)
     if len(u) == 0:
         return image
     lo_u, lo_v = u.min(), v.min()
-    span = max(np.ptp(u), np.ptp(v), 1e-9)
+    span = max(span, 1e-9)
     inner = size - splat
     scale = inner / span
     # centred on the shorter axis
@@ -132,7 +133,9 @@ def render_views(points, size=96):
     the highest point of each pixel in front; the side view looks across
     the segment's main horizontal direction (the first principal axis of
     its x, y), so that it shows its widest side, the nearest point in
-    front. Each view is scaled to fit, with equal scales on both axes.
+    front. Both views have one scale, equal on both axes: the largest
+    extent of the segment fills the image (a pole is a dot from above and
+    a line the image's height from the side).
 
     Parameters
     ----------
@@ -166,7 +169,6 @@ def render_views(points, size=96):
     colour = (1 + np.round((z - z.min()) / max(np.ptp(z), 1e-9) * 254)).astype(np.uint8)
     # sparse segments: 2x2 dots, so that they stay visible
     splat = 2 if len(points) < size * size // 4 else 1
-    top = _rasterise(points[:, 0], points[:, 1], z, colour, size, splat)
     xy = points[:, :2] - points[:, :2].mean(axis=0)
     axis = np.array([1.0, 0.0])
     if len(points) > 2:
@@ -174,7 +176,10 @@ def render_views(points, size=96):
         axis = vectors[:, -1]
     along = xy @ axis
     across = xy @ np.array([-axis[1], axis[0]])
-    side = _rasterise(along, z, -across, colour, size, splat)
+    # one scale for both views: the largest extent fills the image
+    span = max(np.ptp(xy[:, 0]), np.ptp(xy[:, 1]), np.ptp(z), np.ptp(along))
+    top = _rasterise(points[:, 0], points[:, 1], z, colour, size, splat, span)
+    side = _rasterise(along, z, -across, colour, size, splat, span)
     return top, side
 
 
