@@ -498,10 +498,16 @@ def _few_shot(data):
 
 def _stages(data):
     rows = []
-    for stage, best in data["stages"].items():
-        before, after = best["before"], best["after"]
-        rows.append([Text(stage), num(before, 3), num(after, 3), ratio(after, before)])
-    header = ["stage", "before, s", "after, s", "after / before"]
+    for stage, clocks in data["stages"].items():
+        row = [Text(stage)]
+        for clock in ("wall", "cpu"):
+            before, after = clocks[clock]["before"], clocks[clock]["after"]
+            row += [num(before, 3), num(after, 3), ratio(after, before)]
+        rows.append(row)
+    header = [
+        "stage", "wall before, s", "wall after, s", "wall after / before",
+        "CPU before, s", "CPU after, s", "CPU after / before",
+    ]  # fmt: skip
     where = provenance(data)
     commits = data["commit"]
     where["commit"] = f"{commits['before']} (before), {commits['after']} (after)"
@@ -663,7 +669,8 @@ TABLES = {
         "stages.json",
         _stages,
         "Each stage before and after a change that should not change speed (best "
-        "times; a fresh process each, the two checkouts alternating).",
+        "wall-clock and best CPU times of all the process's threads; a fresh "
+        "process each, the two checkouts alternating).",
     ),
     "tiles": Table(
         "tiles.json",
