@@ -88,7 +88,7 @@ def discard(entry):
     """
     path = entry["path"]
     if entry["kind"] == "file":
-        with contextlib.suppress(FileNotFoundError):
+        with contextlib.suppress(FileNotFoundError, NotADirectoryError):
             os.unlink(path)
         return
     old = entry.get("old")

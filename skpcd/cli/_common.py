@@ -418,8 +418,10 @@ def add_skip_unreadable(parser):
 def check_output(path, args, command, *, inputs=()):
     """The output file ``path``, refused before any work when it exists
     without ``--overwrite``, is a folder, lies in no folder, is one of
-    ``inputs`` (whatever the flags), or cannot be written (a read-only
-    folder, a full disk: an OSError naming it)."""
+    ``inputs`` (whatever the flags), lies inside the FOLDER of segments
+    the command reads (``args.folder``: a next run would read it), or
+    cannot be written (a read-only folder, a full disk: an OSError naming
+    it)."""
     out = Path(path)
     if out.is_dir():
         raise CommandError(command, f"{out} is a folder; give a file name")
@@ -428,6 +430,15 @@ def check_output(path, args, command, *, inputs=()):
             command, f"the folder {out.parent} of {out.name} does not exist"
         )
     check_not_an_input(out, command, inputs)
+    folder = getattr(args, "folder", None)
+    if folder is not None and Path(folder).is_dir():
+        if out.resolve().is_relative_to(Path(folder).resolve()):
+            raise CommandError(
+                command,
+                f"the output {out} is inside {folder}, the folder of segments "
+                "read: the next run would read it as a segment; write it "
+                "elsewhere",
+            )
     if out.exists() and not args.overwrite:
         raise CommandError(command, f"{out} exists; pass --overwrite to replace it")
     from skpcd.io._atomic import check_writable

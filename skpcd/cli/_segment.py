@@ -2,7 +2,6 @@
 
 import csv
 import sys
-import tempfile
 import time
 from contextlib import ExitStack
 from pathlib import Path
@@ -215,6 +214,7 @@ def segment_file(args, command, fields=None):
     not ground), in file order."""
     from skpcd.io import read_point_cloud
     from skpcd.segmentation import segment_scene
+    from skpcd.utils._progress import stage
 
     tiled = args.tile_size is not None
     finite = None
@@ -227,7 +227,8 @@ def segment_file(args, command, fields=None):
         points, extras, source = None, {}, args.scene
     else:
         want = "all" if fields or args.ground == "from-file" else None
-        read = read_point_cloud(args.scene, fields=want, nonfinite="keep")
+        with stage(f"reading {Path(args.scene).name}"):
+            read = read_point_cloud(args.scene, fields=want, nonfinite="keep")
         points, extras = read if want else (read, {})
         finite = np.isfinite(points).all(axis=1)
         source = points if finite.all() else points[finite]
@@ -289,21 +290,26 @@ def segment_file(args, command, fields=None):
 
 def _segments(args, points, extras, result, folder, *, fields=True):
     """``(points, fields)`` of each segment, in order (the fields only with
-    ``fields`` and ``--keep-fields``)."""
+    ``fields`` and ``--keep-fields``), with a progress bar (writing them for
+    segment, classifying them for identify)."""
     from skpcd.segmentation._members import iter_segment_points, segment_members
+    from skpcd.utils._progress import progress
 
     if points is None:  # tiled: gathered in one pass over the scene
-        return iter_segment_points(
+        each = iter_segment_points(
             args.scene,
             result.labels,
             result.n_segments,
             fields=fields and args.keep_fields,
             folder=folder,
         )
-    return (
-        (points[idx], {name: values[idx] for name, values in extras.items()})
-        for idx in segment_members(result.labels, result.n_segments)
-    )
+    else:
+        each = (
+            (points[idx], {name: values[idx] for name, values in extras.items()})
+            for idx in segment_members(result.labels, result.n_segments)
+        )
+    desc = "writing" if args.command == "segment" else "classifying"
+    return progress(each, total=result.n_segments, desc=desc)
 
 
 def _metadata(args, result):
@@ -330,7 +336,7 @@ def _metadata(args, result):
 
 def run_segment(args):
     from skpcd.exceptions import MissingFileError
-    from skpcd.io._atomic import check_folder_output
+    from skpcd.io._atomic import check_folder_output, check_writable
     from skpcd.io._segment_folder import (
         SEGMENTS_SUMMARY,
         is_segment_run_file,
@@ -353,6 +359,7 @@ def run_segment(args):
             "segments (files skpcd did not write are never deleted)",
         )
     check_folder_output(out, overwrite=True, owned=is_segment_run_file)
+    check_writable(out)
     points, extras, result = segment_file(
         args, "segment", "all" if args.keep_fields else None
     )
@@ -392,8 +399,9 @@ def _las_header(args):
 def run_identify(args):
     from skpcd.classification import identify_segments
     from skpcd.io import write_labelled_scan
-    from skpcd.io._atomic import PARTIAL_MARK, atomic_path
+    from skpcd.io._atomic import atomic_path, scratch_folder
     from skpcd.segmentation._members import spread_to_points
+    from skpcd.utils._progress import stage
 
     inputs = [args.scene] + ([args.model] if args.model else [])
     out = check_output(args.output, args, "identify", inputs=inputs)
@@ -405,11 +413,7 @@ def run_identify(args):
     points, _, result = segment_file(args, "identify")
     n_points = len(result.labels)
     with ExitStack() as stack:
-        work = Path(
-            stack.enter_context(
-                tempfile.TemporaryDirectory(prefix=PARTIAL_MARK, dir=out.parent)
-            )
-        )
+        work = stack.enter_context(scratch_folder(out.parent))
         pred, kind, seg_score, seg_sizes = identify_segments(
             model,
             measuring(
@@ -441,6 +445,7 @@ def run_identify(args):
         )
         out_tmp = stack.enter_context(atomic_path(out, overwrite=args.overwrite))
         legend_tmp = stack.enter_context(atomic_path(legend, overwrite=args.overwrite))
+        stack.enter_context(stage(f"writing {out.name}"))
         try:
             write_labelled_scan(
                 args.scene,
