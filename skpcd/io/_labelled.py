@@ -346,6 +346,9 @@ def _upgraded(laspy, header, codes):
     for dim in fmt.extra_dimensions:
         point_format.dimensions.append(dim)
     header.set_version_and_point_format(laspy.header.Version(1, 4), point_format)
+    # formats 6 to 10 read the CRS from the WKT VLR when this bit says so
+    if any((v.user_id, v.record_id) == ("LASF_Projection", 2112) for v in header.vlrs):
+        header.global_encoding.wkt = True
     return header
 
 

@@ -157,6 +157,7 @@ def test_classes_go_into_classification_of_a_legacy_scan(tmp_path):
     got, source = laspy.read(out), laspy.read(AUTZEN)
     # codes above 31 need the LAS 1.4 counterpart of format 3
     assert str(got.header.version) == "1.4" and got.header.point_format.id == 7
+    assert got.header.global_encoding.wkt  # the CRS read from the WKT VLR
     codes = np.array([1, 6, 64, 76, 5])[labels["class_index"] + 1]
     codes[labels["ground"]] = 2
     np.testing.assert_array_equal(got.classification, codes)
