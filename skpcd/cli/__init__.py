@@ -3,11 +3,10 @@
 One module per command (or pair of commands), each with ``add_parser(s)``
 and ``run_*`` functions: ``_info`` (info), ``_evaluate`` (evaluate, score),
 ``_model`` (fit, predict), ``_describe`` (describe), ``_segment`` (segment,
-identify); ``_common`` holds the shared options, the output checks and the
-way a command ends (:func:`skpcd.cli._common.run`).
+identify), ``_simulate`` (simulate); ``_common`` holds the shared options,
+the output checks and the way a command ends (:func:`skpcd.cli._common.run`).
 """
 
-import argparse
 import os
 import signal
 import sys
@@ -38,7 +37,17 @@ if _is_the_command():
         if signal.getsignal(_signum) is not signal.SIG_IGN:
             signal.signal(_signum, _end_before_start)
 
-from skpcd.cli import _describe, _evaluate, _info, _model, _review, _segment  # noqa: E402
+import argparse  # noqa: E402
+
+from skpcd.cli import (  # noqa: E402
+    _describe,
+    _evaluate,
+    _info,
+    _model,
+    _review,
+    _segment,
+    _simulate,
+)
 from skpcd.cli._common import on_cluster, run, supervised  # noqa: E402
 from skpcd.cli._evaluate import format_report  # noqa: E402
 
@@ -67,6 +76,7 @@ def build_parser():
     _describe.add_parser(sub)
     _segment.add_parsers(sub)
     _review.add_parser(sub)
+    _simulate.add_parser(sub)
     return parser
 
 

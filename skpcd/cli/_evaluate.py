@@ -1,7 +1,11 @@
 """``skpcd evaluate [FOLDER]``: cross-validate a pipeline; ``skpcd score
 MODEL FOLDER``: how a saved model does on labelled segments."""
 
+import csv
+import json
+import os
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -9,8 +13,11 @@ from skpcd.cli._common import (
     QUIET_HELP,
     CommandError,
     add_n_jobs,
+    add_output_options,
     add_skip_unreadable,
     add_trust_pickle,
+    check_not_an_input,
+    check_output,
     labels_path,
     load_labelled,
     load_model_for,
@@ -62,6 +69,41 @@ def format_report(y_true, y_pred, fold_scores=None):
     for c, row in zip(classes, cm):
         lines.append(f"{c:>{width}} " + " ".join(f"{v:>{width}d}" for v in row))
     return "\n".join(lines)
+
+
+def report_dict(y_true, y_pred):
+    """What ``skpcd score -o REPORT.json`` writes: the numbers of
+    :func:`format_report` (one accuracy over all predictions).
+
+    Parameters
+    ----------
+    y_true, y_pred : array-like of shape (n_predictions,)
+        True and predicted labels.
+
+    Returns
+    -------
+    report : dict
+        ``accuracy``, ``n_segments``, ``classes`` (true and predicted, as
+        the rows and columns of the matrix), ``per_class`` (precision,
+        recall, f1-score and support of each class, as
+        :func:`sklearn.metrics.classification_report` gives them) and
+        ``confusion_matrix`` (rows: true class, columns: predicted class).
+    """
+    from sklearn.metrics import classification_report, confusion_matrix
+
+    y_true = np.asarray(y_true).astype(str)
+    y_pred = np.asarray(y_pred).astype(str)
+    classes = np.unique(np.concatenate([y_true, y_pred])).tolist()
+    per_class = classification_report(
+        y_true, y_pred, labels=classes, zero_division=0, output_dict=True
+    )
+    return {
+        "accuracy": float(np.mean(y_true == y_pred)),
+        "n_segments": len(y_true),
+        "classes": classes,
+        "per_class": {c: per_class[c] for c in classes},
+        "confusion_matrix": confusion_matrix(y_true, y_pred, labels=classes).tolist(),
+    }
 
 
 # ``skpcd evaluate --data NAME`` without a folder: the scan pattern (None:
@@ -213,8 +255,16 @@ def add_parsers(sub):
     sc.add_argument(
         "--labels", help="CSV of file,label rows (default: FOLDER/labels.csv)"
     )
+    sc.add_argument(
+        "-o",
+        "--output",
+        help="also write the scores to this file: .csv, one row per segment "
+        "(file, label, predicted, and the probability or similarity); .json, "
+        "the accuracy, per-class precision, recall, f1-score and support and "
+        "the confusion matrix; any other name, the report as printed",
+    )
     add_skip_unreadable(sc)
-    sc.add_argument("--quiet", action="store_true", help=QUIET_HELP)
+    add_output_options(sc)
     add_trust_pickle(sc)
     sc.set_defaults(func=run_score)
     return ev, sc
@@ -296,14 +346,52 @@ def run_evaluate(args):
 
 
 def run_score(args):
+    out = None
+    if args.output is not None:
+        out = check_output(args.output, args, "score", inputs=[args.model])
     labels_path(args)  # the folder and its labels exist
-    clouds, y, source, _ = load_labelled(args)
+    clouds, y, source, files = load_labelled(args)
+    if out is not None:
+        check_not_an_input(out, "score", files)
     model = load_model_for(args, "score")
     start = time.perf_counter()
-    pred, _, _ = predict_or_explain(model, clouds, args, "score")
+    pred, kind, score = predict_or_explain(model, clouds, args, "score")
+    report = format_report(y, pred)
     print(f"model     {args.model}")
     print(f"data      {source}: {len(clouds)} segments")
     print(f"time      {time.perf_counter() - start:.1f} s")
     print()
-    print(format_report(y, pred))
+    print(report)
+    if out is not None:
+        names = [Path(os.path.relpath(f, args.folder)).as_posix() for f in files[1:]]
+        if len(names) != len(y):  # not a folder: the segments by number
+            names = [str(i) for i in range(len(y))]
+        _write_scores(out, args, report, (names, y, pred, kind, score))
+        print(f"\nwritten   {out}")
     return 0
+
+
+def _write_scores(out, args, report, scores):
+    """``skpcd score -o``: by the extension of ``out``, the per-segment
+    rows (.csv), the numbers (.json) or the report; written whole or not at
+    all."""
+    from skpcd.io._atomic import atomic_path
+
+    names, y, pred, kind, score = scores
+    suffix = out.suffix.lower()
+    with atomic_path(out, overwrite=args.overwrite) as tmp:
+        with open(tmp, "w", newline="") as f:
+            if suffix == ".csv":
+                writer = csv.writer(f)
+                writer.writerow(
+                    ["file", "label", "predicted"] + ([kind] if kind else [])
+                )
+                for i, name in enumerate(names):
+                    extra = [f"{score[i]:.6f}"] if kind else []
+                    writer.writerow([name, y[i], pred[i], *extra])
+            elif suffix == ".json":
+                numbers = {"model": str(args.model), "data": str(args.folder)}
+                json.dump({**numbers, **report_dict(y, pred)}, f, indent=1)
+                f.write("\n")
+            else:
+                f.write(report + "\n")

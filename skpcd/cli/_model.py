@@ -91,6 +91,7 @@ def add_parsers(sub):
         "--model", dest="model_option", metavar="MODEL", help="the model, as an option"
     )
     pred.add_argument("-o", "--output", required=True, help="predictions CSV")
+    add_n_jobs(pred)
     add_skip_unreadable(pred)
     add_output_options(pred)
     add_scheduler(pred)
@@ -175,6 +176,44 @@ def _augmented(pipeline, args):
     )
 
 
+def with_n_jobs(model, n_jobs):
+    """``model`` with the ``n_jobs`` of every part set to ``n_jobs``: its
+    parameters (pipeline steps, feature unions, wrapped estimators) and its
+    fitted parts (``estimator_`` of a wrapper, the trees of a forest...),
+    which predict with them. The answers do not depend on it.
+
+    Parameters
+    ----------
+    model : estimator
+        A fitted model (as :func:`~skpcd.io.load_model` returns it).
+    n_jobs : int
+        Threads (-1: all cores).
+
+    Returns
+    -------
+    model : estimator
+        The same object, changed in place.
+    """
+    seen = set()
+
+    def visit(est):
+        if id(est) in seen or not hasattr(est, "get_params"):
+            return
+        seen.add(id(est))
+        params = est.get_params(deep=True)
+        names = [k for k in params if k == "n_jobs" or k.endswith("__n_jobs")]
+        if names:
+            est.set_params(**dict.fromkeys(names, n_jobs))
+        parts = [v for k, v in params.items() if "__" not in k]
+        parts += [v for k, v in vars(est).items() if k.endswith("_")]
+        for part in parts:
+            for item in part if isinstance(part, (list, tuple)) else [part]:
+                visit(item[-1] if isinstance(item, tuple) else item)
+
+    visit(model)
+    return model
+
+
 def run_predict(args):
     from skpcd.io._atomic import atomic_path
 
@@ -183,7 +222,7 @@ def run_predict(args):
         args.output, args, "predict", inputs=[args.model] if args.model else []
     )
     check_folder(args.folder, "predict")
-    model = load_model_for(args, "predict")
+    model = with_n_jobs(load_model_for(args, "predict"), args.n_jobs)
     clouds, _, names, files = read_folder(args)
     check_not_an_input(out, "predict", files)
     pred, kind, score = predict_or_explain(model, clouds, args, "predict")
