@@ -194,9 +194,7 @@ def _text_las(las):
         out.append("crs       none")
     else:
         epsg = f"EPSG:{crs['epsg']}; " if crs["epsg"] else ""
-        out.append(
-            f"crs       {crs['name'] or '(unnamed)'} ({epsg}{crs['from']})"
-        )
+        out.append(f"crs       {crs['name'] or '(unnamed)'} ({epsg}{crs['from']})")
     for key, label in (("vlrs", "vlr"), ("evlrs", "evlr")):
         for v in las[key]:
             out.append(

@@ -572,8 +572,19 @@ def write_labelled_scan(
     source's octree (user id ``copc``: the copy is a plain LAZ file, its
     points are not in octree order). Then:
 
-    - ``classification`` is set to 2 (ASPRS ground) where ``ground`` is True,
-      unchanged elsewhere (its flag bits too);
+    - with ``classes_into="classification"`` (the default), ``classification``
+      holds the class of each point as the code
+      :func:`~skpcd.io._class_codes.classification_codes` gives it (ASPRS
+      codes where they exist, user codes from 64 otherwise), 2 (ASPRS
+      ground) where ``ground`` is True and 1 (unclassified) elsewhere, its
+      flag bits kept, and the input's classification goes to an extra
+      dimension ``original_classification`` (uint8; an input that has one
+      keeps its own). A legacy point format (0 to 5: codes 0 to 31 only)
+      becomes its LAS 1.4 counterpart (6, 7, 9 or 10) when a code above 31
+      is needed; the header is otherwise kept;
+    - with ``classes_into="extra"``, ``classification`` is set to 2 (ASPRS
+      ground) where ``ground`` is True, unchanged elsewhere (its flag bits
+      too);
     - extra-bytes dimensions are added, each with a description in the Extra
       Bytes VLR: ``segment`` (int32, -1 = no segment), ``class`` (uint8,
       64 + j for ``class_names[j]``, 0 = no class), the score under
@@ -581,7 +592,8 @@ def write_labelled_scan(
       input extra dimension of one of these names (an earlier output) is
       replaced, not duplicated;
     - the class names go into the file: a Classification Lookup VLR
-      (``LASF_Spec``, record 0; entries ``uint8 code + 15 ASCII bytes`` for
+      (``LASF_Spec``, record 0; entries ``uint8 code + 15 ASCII bytes``: the
+      codes that ``classification`` holds, or with ``classes_into="extra"``
       the codes 64 + j, those below 64 of an input lookup kept) and, since 15
       bytes truncate, a VLR of user id ``skpcd``, record 1, holding the full
       names as UTF-8 JSON (:func:`read_class_names` reads either).
@@ -623,6 +635,16 @@ def write_labelled_scan(
         drops the input's extra-bytes dimensions (the standard dimensions of
         its point format stay) and other copies hold only xyz and the new
         fields.
+    classes_into : {"classification", "extra"}, default="classification"
+        Where the classes go in a LAS/LAZ output: into ``classification``
+        as well as the ``class`` dimension (what LAS viewers colour by and
+        PDAL filters select on; the input's classification kept in
+        ``original_classification``), or into ``class`` alone, leaving
+        ``classification`` as it was but for the ground. Other outputs are
+        the same either way.
+    class_codes : dict of str to int, default=None
+        Classification codes (0 to 255) for some class names, in place of
+        those of :func:`~skpcd.io._class_codes.classification_codes`.
     chunk_size : int, default=1_000_000
         Points per chunk when streaming. The file content does not depend on
         it.
@@ -637,7 +659,9 @@ def write_labelled_scan(
         If an array's length differs from the source's point count (the
         message names the file and both counts), values are out of range,
         there are more than 192 classes for a LAS output, ``score_name``
-        clashes with a dimension, or ``output`` is the source.
+        clashes with a dimension, ``output`` is the source, ``classes_into``
+        is neither "classification" nor "extra", or a code of
+        ``class_codes`` is not 0 to 255.
     FileExistsError
         If ``output`` exists and ``overwrite`` is False.
     MissingFileError
