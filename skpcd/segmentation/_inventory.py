@@ -65,9 +65,9 @@ CARRIED_MIN_POINTS = 3
 
 
 def _min_area_rectangle(xy):
-    """``(width, length, heading)`` of the smallest rectangle around ``xy``:
-    width <= length, heading the direction of the long side in degrees
-    clockwise from north (+y), in [0, 180)."""
+    """``(width, length, heading, centre)`` of the smallest rectangle around
+    ``xy``: width <= length, heading the direction of the long side in
+    degrees clockwise from north (+y), in [0, 180), centre its centre."""
     from scipy.spatial import ConvexHull, QhullError
 
     xy = np.unique(np.round(xy, 4), axis=0)
@@ -79,7 +79,7 @@ def _min_area_rectangle(xy):
         except QhullError:  # collinear: a line of points
             hull = xy
     if len(hull) < 2:
-        return 0.0, 0.0, 0.0
+        return 0.0, 0.0, 0.0, xy.mean(axis=0)
     edges = np.roll(hull, -1, axis=0) - hull
     angles = np.unique(np.mod(np.arctan2(edges[:, 1], edges[:, 0]), np.pi / 2))
     best = None
@@ -89,13 +89,16 @@ def _min_area_rectangle(xy):
         v = hull @ np.array([-s, c])
         du, dv = np.ptp(u), np.ptp(v)
         if best is None or du * dv < best[0] - 1e-12:
-            best = (du * dv, du, dv, a)
-    _, du, dv, a = best
+            mid = np.array([u.min() + du / 2, v.min() + dv / 2])
+            best = (du * dv, du, dv, a, mid)
+    _, du, dv, a, mid = best
+    c, s = math.cos(a), math.sin(a)
+    centre = np.array([c * mid[0] - s * mid[1], s * mid[0] + c * mid[1]])
     if dv > du:  # the long side along v
         du, dv, a = dv, du, a + np.pi / 2
     # direction (cos a, sin a) to a bearing from +y, clockwise
     heading = math.degrees(math.atan2(math.cos(a), math.sin(a))) % 180.0
-    return float(dv), float(du), float(heading)
+    return float(dv), float(du), float(heading), centre
 
 
 def _pole(points, zmin, height):
@@ -158,7 +161,8 @@ def segment_geometry(points, *, pole=False):
         and highest point; ``width``, ``length``: the sides of the smallest
         rectangle around its points seen from above (width <= length),
         ``heading``: the direction of the long side, degrees clockwise from
-        north (+y), in [0, 180); ``n_points``; ``lean``: the angle of the
+        north (+y), in [0, 180), ``centre``: its centre (ndarray of shape
+        (2,)); ``n_points``; ``lean``: the angle of the
         pole's shaft (its points 0.3 to 2.3 m above its base, a line fitted
         to them) from vertical, degrees; ``carried_height``: the height
         above its lowest point of the lowest part of what the pole carries
@@ -185,7 +189,7 @@ def segment_geometry(points, *, pole=False):
     z = points[:, 2]
     zmin, zmax = float(z.min()), float(z.max())
     base = points[z <= zmin + BASE_SLICE, :2].mean(axis=0)
-    width, length, heading = _min_area_rectangle(points[:, :2])
+    width, length, heading, centre = _min_area_rectangle(points[:, :2])
     lean, carried = _pole(points, zmin, zmax - zmin) if pole else (math.nan,) * 2
     return {
         "x": float(base[0]),
@@ -195,6 +199,7 @@ def segment_geometry(points, *, pole=False):
         "width": width,
         "length": length,
         "heading": heading,
+        "centre": centre,
         "n_points": len(points),
         "lean": lean,
         "carried_height": carried,
