@@ -35,7 +35,16 @@ finally:
 
 HEAVY = ("sklearn", "numba", "scipy", "pandas", "joblib", "laspy", "tqdm")
 
-COMMANDS = ("info", "evaluate", "score", "fit", "predict", "describe", "segment")
+COMMANDS = (
+    "info",
+    "evaluate",
+    "score",
+    "fit",
+    "predict",
+    "describe",
+    "segment",
+    "simulate",
+)
 
 
 def _loaded(*args):
