@@ -5,8 +5,8 @@ A file: points, fields, bounds and spacing; for LAS/LAZ also what ``pdal
 info`` and ``lasinfo`` show (version, point format, scales and offsets,
 CRS, VLRs, extra dimensions, classification and return histograms). A
 folder written by ``skpcd segment``: its segments, points, files and types,
-what the run chose and, with a labels or predictions file, the classes. No
-scikit-learn is loaded.
+what the run chose and, with a labels or predictions file, the classes. A
+file is described without loading scikit-learn.
 """
 
 import csv

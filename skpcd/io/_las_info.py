@@ -50,14 +50,12 @@ def _crs_from_vlrs(header):
 
 def _crs(header):
     try:
-        import pyproj  # noqa: F401
+        parsed = header.parse_crs()  # imports pyproj
     except ImportError:
         crs = _crs_from_vlrs(header)
         if crs is not None:
             crs["from"] += "; pyproj not installed"
         return crs
-    try:
-        parsed = header.parse_crs()
     except Exception:  # a CRS pyproj cannot parse: what the VLRs say
         parsed = None
     if parsed is None:

@@ -24,6 +24,7 @@ from skpcd.io._api import (
 )
 from skpcd.io._atomic import atomic_folder
 from skpcd.io._las_writer import write as write_las
+from skpcd.utils._progress import progress
 
 __all__ = [
     "SEGMENTATION_METADATA",
@@ -302,8 +303,6 @@ def read_segments(
                 labels_path, f"{len(unlabelled)} file(s) have no label: {shown}"
             )
     check_segment_run(folder_or_glob, names)
-    from skpcd.utils._progress import progress  # loads scikit-learn
-
     show = None if verbose else False
     clouds, kept, skipped = [], [], []
     for f, name in zip(progress(files, desc="reading", enabled=show), names):
