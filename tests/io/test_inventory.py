@@ -254,3 +254,22 @@ def test_tiled_identify_finds_the_same_ground(street):
     same = dist < 0.05
     assert same.sum() >= 10
     np.testing.assert_allclose(tiled[same, 2], whole[near[same], 2], atol=0.05)
+
+
+def test_a_wkt_crs_is_written_as_gdal_reads_it(tmp_path):
+    wkt = (
+        'PROJCS["ETRS89 / UTM zone 32N",GEOGCS["ETRS89",DATUM["European_Terrestrial_'
+        'Reference_System_1989",SPHEROID["GRS 1980",6378137,298.257222101]],'
+        'PRIMEM["Greenwich",0],UNIT["degree",0.0174532925199433]],'
+        'PROJECTION["Transverse_Mercator"],PARAMETER["latitude_of_origin",0],'
+        'PARAMETER["central_meridian",9],PARAMETER["scale_factor",0.9996],'
+        'PARAMETER["false_easting",500000],PARAMETER["false_northing",0],'
+        'UNIT["metre",1],AUTHORITY["EPSG","25832"]]'
+    )
+    table = object_inventory([segment_geometry(_pole())], ["pole"], [0.7])
+    for name in ("objects.geojson", "objects.gpkg"):
+        write_inventory(tmp_path / name, table, crs=wkt)
+        assert pyogrio.read_info(tmp_path / name)["crs"] == f"EPSG:{EPSG}"
+    # WGS 84 is GeoJSON's own: no crs member
+    write_inventory(tmp_path / "wgs84.geojson", table, crs="EPSG:4326")
+    assert "crs" not in json.loads((tmp_path / "wgs84.geojson").read_text())
