@@ -298,7 +298,9 @@ eleventh to twentieth) set the class shown;
     } else { return; }
     e.preventDefault();
   });
-  filter.addEventListener("change", applyFilter);
+  // back to the cards after a choice, so that the keys label them again
+  filter.addEventListener("change", function () { applyFilter(); filter.blur(); });
+  accept.addEventListener("change", function () { accept.blur(); });
   document.getElementById("save").addEventListener("click", save);
 
   showClasses();

@@ -109,6 +109,12 @@ def test_cards_least_confident_first_and_filter(loaded, page):
     )
     expected = [n for n, y in zip(page["names"], page["truth"]) if y == "pole"]
     assert sorted(shown) == sorted(expected)
+    # the keys move through the cards shown only, and label them at once
+    _press(loaded, ["j", "j"])
+    current = loaded.execute_script(
+        "return skpcdReview.cards[skpcdReview.current()].file"
+    )
+    assert current == shown[2]  # the first shown selected, then two on
 
 
 def test_key_presses_end_in_saved_csv(loaded, page, downloads):
