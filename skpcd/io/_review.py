@@ -8,15 +8,36 @@ forbids any). The user sets labels with the keyboard and saves a
 ``labels.csv`` of ``file,label`` rows, which ``skpcd fit`` reads as it is.
 """
 
+import base64
 import json
 import math
 
 import numpy as np
 
 from skpcd.io._atomic import atomic_path
-from skpcd.io._thumbnails import view_data_uris
+from skpcd.io._thumbnails import HEIGHT_PALETTE, view_data_uris
 
 __all__ = ["review_cards", "write_review_page"]
+
+# points of a segment kept for the page's 3-D view
+VIEW_POINTS = 400
+
+
+def _view_points(cloud, n_points=VIEW_POINTS):
+    """At most ``n_points`` points of ``cloud`` (evenly spread over its
+    order after a fixed shuffle), centred on its box and scaled by its
+    largest half-extent to [-1, 1], as 3 bytes each in base64."""
+    if len(cloud) == 0:
+        return ""
+    rng = np.random.default_rng(0)
+    keep = rng.permutation(len(cloud))[:n_points]
+    pts = cloud[np.sort(keep)]
+    lo, hi = cloud.min(axis=0), cloud.max(axis=0)
+    half = max(float(np.max(hi - lo)) / 2, 1e-9)
+    unit = (pts - (lo + hi) / 2) / half
+    codes = np.clip(np.round((unit + 1) * 127.5), 0, 255).astype(np.uint8)
+    return base64.b64encode(codes.tobytes()).decode("ascii")
+
 
 # The page. __TITLE__ and __DATA__ are replaced (the data is JSON whose "</"
 # are escaped, so that it cannot end its <script> element).
@@ -55,6 +76,11 @@ image-rendering:pixelated}
 .label b{color:#070}
 button,select{font:inherit}
 #status{margin-left:12px}
+#viewer{position:fixed;inset:0;z-index:5;background:rgba(0,0,0,.45);display:none;
+align-items:center;justify-content:center}
+#viewer.open{display:flex}
+#viewer div{background:#fff;padding:8px;border-radius:4px;text-align:center}
+#viewer canvas{background:#fff;cursor:grab;display:block}
 </style>
 </head>
 <body>
@@ -69,10 +95,13 @@ unlabelled segments as their labels</label>
 <div id="keys">Keys: <b>1</b>-<b>9</b>, <b>0</b> (with <b>Shift</b>: the
 eleventh to twentieth) set the class shown;
 <b>a</b> or <b>Enter</b> accept the prediction; <b>n</b> a new class;
-<b>x</b> clear; <b>j</b>/<b>&rarr;</b>/<b>&darr;</b> next,
+<b>x</b> clear; <b>v</b> a 3-D view; <b>j</b>/<b>&rarr;</b>/<b>&darr;</b> next,
 <b>k</b>/<b>&larr;</b>/<b>&uarr;</b> previous; <b>s</b> save.</div>
 </header>
 <div id="grid"></div>
+<div id="viewer"><div><canvas id="view3d" width="480" height="480"></canvas>
+<span id="view3d-name"></span> &mdash; drag to turn; <b>v</b> or <b>Esc</b> closes</div>
+</div>
 <script type="application/json" id="review-data">__DATA__</script>
 <script>
 "use strict";
@@ -274,8 +303,78 @@ eleventh to twentieth) set the class shown;
       "skpcd fit needs every segment labelled" : "") + ")";
   }
 
+  // a light 3-D view: the segment's points (at most a few hundred, stored
+  // as bytes in its box) turned with the mouse, drawn on a canvas
+  const viewer = document.getElementById("viewer");
+  const canvas = document.getElementById("view3d");
+  const ctx = canvas.getContext("2d");
+  const ramp = data.palette;
+  let shown3d = null, yaw = 0.6, pitch = 0.35;
+
+  function decode(b64) {
+    const raw = atob(b64), out = new Float32Array(raw.length);
+    for (let i = 0; i < raw.length; i++) out[i] = raw.charCodeAt(i) / 127.5 - 1;
+    return out;
+  }
+
+  function draw3d() {
+    const p = shown3d.points, n = p.length / 3;
+    const cy = Math.cos(yaw), sy = Math.sin(yaw);
+    const cp = Math.cos(pitch), sp = Math.sin(pitch);
+    const items = [];
+    for (let i = 0; i < n; i++) {
+      const x = p[3 * i], y = p[3 * i + 1], z = p[3 * i + 2];
+      const u = cy * x - sy * y, w = sy * x + cy * y;
+      items.push([u, cp * z - sp * w, sp * z + cp * w, z]);
+    }
+    items.sort(function (a, b) { return b[2] - a[2]; });
+    ctx.fillStyle = "#fff";
+    ctx.fillRect(0, 0, canvas.width, canvas.height);
+    const half = canvas.width / 2, scale = half * 0.55;
+    for (const it of items) {
+      const t = (it[3] - shown3d.zlo) / Math.max(shown3d.zhi - shown3d.zlo, 1e-9);
+      const c = ramp[1 + Math.round(t * 254)];
+      ctx.fillStyle = "rgb(" + c[0] + "," + c[1] + "," + c[2] + ")";
+      ctx.fillRect(half + it[0] * scale - 2, half - it[1] * scale - 2, 4, 4);
+    }
+  }
+
+  function open3d(i) {
+    const points = decode(cards[i].points);
+    let zlo = Infinity, zhi = -Infinity;
+    for (let j = 2; j < points.length; j += 3) {
+      zlo = Math.min(zlo, points[j]); zhi = Math.max(zhi, points[j]);
+    }
+    shown3d = {index: i, points: points, zlo: zlo, zhi: zhi};
+    document.getElementById("view3d-name").textContent = cards[i].file;
+    viewer.classList.add("open");
+    draw3d();
+  }
+
+  function close3d() { viewer.classList.remove("open"); shown3d = null; }
+
+  let drag = null;
+  canvas.addEventListener("mousedown", function (e) {
+    drag = [e.clientX, e.clientY];
+  });
+  window.addEventListener("mouseup", function () { drag = null; });
+  window.addEventListener("mousemove", function (e) {
+    if (!drag || !shown3d) return;
+    yaw += (e.clientX - drag[0]) * 0.01;
+    pitch = Math.max(-1.5, Math.min(1.5, pitch + (e.clientY - drag[1]) * 0.01));
+    drag = [e.clientX, e.clientY];
+    draw3d();
+  });
+  viewer.addEventListener("click", function (e) {
+    if (e.target === viewer) close3d();
+  });
+
   document.addEventListener("keydown", function (e) {
     if (e.ctrlKey || e.metaKey || e.altKey) return;
+    if (shown3d) {
+      if (e.key === "v" || e.key === "Escape") { close3d(); e.preventDefault(); }
+      return;
+    }
     if (e.target.tagName === "SELECT" || e.target.tagName === "INPUT") return;
     const k = e.key;
     if (k === "j" || k === "ArrowDown" || k === "ArrowRight") { move(1); }
@@ -292,6 +391,8 @@ eleventh to twentieth) set the class shown;
       setLabel(current, cards[current].pred); move(1);
     } else if (k === "x" || k === "Backspace" || k === "Delete") {
       setLabel(current, null);
+    } else if (k === "v") {
+      open3d(current);
     } else if (k === "n") {
       const name = window.prompt("New class name");
       if (name) { setLabel(current, name); move(1); }
@@ -320,7 +421,8 @@ eleventh to twentieth) set the class shown;
     save: save,
     lastCsv: function () { return lastCsv; },
     lastBlob: function () { return lastBlob; },
-    current: function () { return current; }
+    current: function () { return current; },
+    view3d: function () { return shown3d ? shown3d.index : null; }
   };
 })();
 </script>
@@ -364,7 +466,9 @@ def review_cards(
     cards : list of dict
         One per segment with ``file``, ``n_points``, ``size`` (extent along
         x, y, z in metres), ``pred``, ``score``, ``label`` (None where
-        absent) and the ``top`` and ``side`` views as PNG data URIs; sorted
+        absent), the ``top`` and ``side`` views as PNG data URIs and
+        ``points``, at most ``VIEW_POINTS`` of its points for the page's 3-D
+        view (3 bytes each, in its box, base64); sorted
         by increasing score (segments without a score last), then in the
         given order.
 
@@ -396,6 +500,7 @@ def review_cards(
                 "label": labels.get(str(name)),
                 "top": top,
                 "side": side,
+                "points": _view_points(cloud),
             }
         )
     order = sorted(
@@ -426,7 +531,8 @@ def write_review_page(
     class and confidence; the cards come least confident first and can be
     filtered by class. The user moves between cards and labels them with
     the keyboard (number keys for the classes, ``a`` to accept the
-    prediction, ``j``/``k`` or the arrows to move) and saves a
+    prediction, ``j``/``k`` or the arrows to move, ``v`` for a 3-D view of
+    a few hundred of its points turned with the mouse) and saves a
     ``labels.csv`` of ``file,label`` rows that ``skpcd fit`` reads as it
     is. Every script, style and picture is inside the file; its
     Content-Security-Policy forbids any request, so it opens from
@@ -504,6 +610,7 @@ def write_review_page(
         "order": names,
         "has_predictions": predictions is not None,
         "score_kind": score_kind or "score",
+        "palette": HEIGHT_PALETTE.tolist(),
     }
     text = json.dumps(data, separators=(",", ":")).replace("</", "<\\/")
     page = _PAGE.replace("__TITLE__", _html_text(title)).replace("__DATA__", text)

@@ -167,3 +167,38 @@ def test_screenshot_is_not_blank(loaded, page):
     r, g = (shot[..., i].astype(int) for i in range(2))
     coloured = (g > r + 30) & (g > 80)
     assert coloured.mean() > 0.002
+
+
+def _canvas_pixels(driver):
+    """The non-white pixels of the 3-D view's canvas."""
+    return driver.execute_script(
+        "const c = document.getElementById('view3d');"
+        "const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;"
+        "let n = 0, h = 0;"
+        "for (let i = 0; i < d.length; i += 4) {"
+        "  if (d[i] + d[i + 1] + d[i + 2] < 700) { n++; h = (h * 31 + i) % 1000003; }"
+        "}"
+        "return [n, h];"
+    )
+
+
+def test_3d_view_opens_turns_and_closes(loaded, page):
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    _reset(loaded, page)
+    _press(loaded, ["v"])
+    assert loaded.execute_script("return skpcdReview.view3d()") == 0
+    assert loaded.find_element("id", "viewer").is_displayed()
+    drawn, before = _canvas_pixels(loaded)
+    assert drawn > 200
+    # keys do not label while it is open
+    _press(loaded, ["1"])
+    assert loaded.execute_script("return skpcdReview.labels.size") == 1
+    canvas = loaded.find_element("id", "view3d")
+    ActionChains(loaded).click_and_hold(canvas).move_by_offset(
+        60, 20
+    ).release().perform()
+    assert _canvas_pixels(loaded)[1] != before  # turned
+    _press(loaded, ["\ue00c"])  # Escape
+    assert loaded.execute_script("return skpcdReview.view3d()") is None
+    assert not loaded.find_element("id", "viewer").is_displayed()
