@@ -159,40 +159,31 @@ def test_read_las_crs(street, tmp_path):
     assert read_las_crs(plain) is None
 
 
-def test_identify_writes_inventories_in_the_scan_crs(street):
+def test_identify_writes_an_inventory_in_the_scan_crs(street):
     folder, scan, points, is_ground = street
-    n_objects = None
-    for name in ("objects.gpkg", "objects.geojson"):
-        out = folder / f"out_{name}.las"
-        inv = folder / name
-        argv = ["identify", str(scan), "-o", str(out), "--inventory", str(inv)]
-        assert main([*argv, "--quiet"]) == 0
-        info = pyogrio.read_info(inv)
-        assert info["geometry_type"] == "Point Z"
-        assert info["crs"] == f"EPSG:{EPSG}"
-        segments = laspy.read(out).segment
-        n = int(segments.max()) + 1
-        assert info["features"] == n
-        n_objects = n
-        meta, _, geometry, fields = pyogrio.raw.read(inv)
-        columns = dict(zip(meta["fields"], fields))
-        assert set(columns) == set(INVENTORY_COLUMNS) - {"x", "y", "z"}
-        np.testing.assert_array_equal(
-            np.sort(columns["n_points"]), np.sort(np.bincount(segments[segments >= 0]))
-        )
-        xyz = np.array([struct.unpack("<ddd", g[-24:]) for g in geometry])
-        # each base lies on the simulated ground under it
-        ground = points[is_ground]
-        from scipy.spatial import cKDTree
+    out, inv = folder / "out.las", folder / "objects.gpkg"
+    argv = ["identify", str(scan), "-o", str(out), "--inventory", str(inv)]
+    assert main([*argv, "--quiet"]) == 0
+    info = pyogrio.read_info(inv)
+    assert info["geometry_type"] == "Point Z"
+    assert info["crs"] == f"EPSG:{EPSG}"
+    segments = laspy.read(out).segment
+    assert info["features"] == int(segments.max()) + 1
+    meta, _, geometry, fields = pyogrio.raw.read(inv)
+    columns = dict(zip(meta["fields"], fields))
+    assert set(columns) == set(INVENTORY_COLUMNS) - {"x", "y", "z"}
+    np.testing.assert_array_equal(
+        np.sort(columns["n_points"]), np.sort(np.bincount(segments[segments >= 0]))
+    )
+    xyz = np.array([struct.unpack("<ddd", g[-24:]) for g in geometry])
+    # each base lies on the simulated ground under it
+    from scipy.spatial import cKDTree
 
-        _, near = cKDTree(ground[:, :2]).query(xyz[:, :2], k=20)
-        below = np.median(ground[near, 2], axis=1)
-        assert np.median(np.abs(xyz[:, 2] - below)) < 0.1
-        assert (columns["height"] > 0).all()
-    # GeoJSON read as plain JSON: the crs member GDAL takes
-    doc = json.loads((folder / "objects.geojson").read_text())
-    assert doc["crs"]["properties"]["name"] == f"urn:ogc:def:crs:EPSG::{EPSG}"
-    assert len(doc["features"]) == n_objects
+    ground = points[is_ground]
+    _, near = cKDTree(ground[:, :2]).query(xyz[:, :2], k=20)
+    below = np.median(ground[near, 2], axis=1)
+    assert np.median(np.abs(xyz[:, 2] - below)) < 0.1
+    assert (columns["height"] > 0).all()
 
 
 def test_csv_inventory_and_refusals(street, tmp_path, monkeypatch):
@@ -270,6 +261,12 @@ def test_a_wkt_crs_is_written_as_gdal_reads_it(tmp_path):
     for name in ("objects.geojson", "objects.gpkg"):
         write_inventory(tmp_path / name, table, crs=wkt)
         assert pyogrio.read_info(tmp_path / name)["crs"] == f"EPSG:{EPSG}"
+    # an EPSG code: the crs member as GDAL reads it
+    write_inventory(tmp_path / "epsg.geojson", table, crs=f"EPSG:{EPSG}")
+    doc = json.loads((tmp_path / "epsg.geojson").read_text())
+    assert doc["crs"]["properties"]["name"] == f"urn:ogc:def:crs:EPSG::{EPSG}"
+    assert pyogrio.read_info(tmp_path / "epsg.geojson")["crs"] == f"EPSG:{EPSG}"
+    assert doc["features"][0]["geometry"]["type"] == "Point"
     # WGS 84 is GeoJSON's own: no crs member
     write_inventory(tmp_path / "wgs84.geojson", table, crs="EPSG:4326")
     assert "crs" not in json.loads((tmp_path / "wgs84.geojson").read_text())
