@@ -270,3 +270,35 @@ def test_a_wkt_crs_is_written_as_gdal_reads_it(tmp_path):
     # WGS 84 is GeoJSON's own: no crs member
     write_inventory(tmp_path / "wgs84.geojson", table, crs="EPSG:4326")
     assert "crs" not in json.loads((tmp_path / "wgs84.geojson").read_text())
+
+
+def test_cars_of_a_real_sweep_measured_from_the_ground(real_sweeps, tmp_path):
+    """PandaSet sweep (Pandar64), cars labelled by boxes: the inventory gives
+    car sizes (height from the ground under the car, also where the segment
+    lacks its wheels, length and width of the footprint)."""
+    scan = next(p for p in real_sweeps if p.name == "pandaset_000200.las")
+    out, inv = tmp_path / "out.las", tmp_path / "objects.csv"
+    argv = ["identify", str(scan), "-o", str(out), "--inventory", str(inv)]
+    assert main([*argv, "--quiet"]) == 0
+    las = laspy.read(out)
+    segment = np.asarray(las.segment).astype(int)
+    semantic = np.asarray(las.semantic).astype(int)
+    z = np.asarray(las.z)
+    with open(inv, newline="") as fh:
+        rows = {int(r["id"]): r for r in csv.DictReader(fh)}
+    cars = []
+    for i, row in rows.items():
+        mine = segment == i
+        if mine.sum() >= 300 and (semantic[mine] == 10).mean() > 0.9:  # car
+            cars.append(
+                [float(row[k]) for k in ("z", "height", "length", "width")]
+                + [z[mine].min()]
+            )
+    cars = np.array(cars)
+    assert len(cars) >= 6
+    base, height, length, width, lowest = cars.T
+    assert (base <= lowest + 1e-6).all()  # on the ground, not above it
+    assert (lowest - base).max() > 0.3  # some segments lack the wheels ...
+    assert np.mean((height > 1.2) & (height < 2.2)) >= 0.8  # ... yet car heights
+    assert np.mean((length > 3.0) & (length < 5.5)) >= 0.7
+    assert np.mean((width > 1.2) & (width < 2.2)) >= 0.8
