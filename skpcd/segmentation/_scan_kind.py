@@ -8,6 +8,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from skpcd.preprocessing import point_spacing
+from skpcd.segmentation._dbscan import stable_draw
 
 __all__ = ["SCAN_KINDS", "ScanKind", "describe_scan", "sweep_coordinates"]
 
@@ -43,6 +44,8 @@ SCAN_KINDS = {
 # neighbourhoods, the concentration around one position).
 _SAMPLE = 20_000
 _SHAPE_SAMPLE = 3_000
+# Points of the sample tried as the position the points concentrate around.
+_CENTRES = 200
 # A cloud whose planar neighbourhoods are less often vertical (walls, car
 # sides, trunks) than this was seen from above. Measured on 27 real
 # airborne tiles (PDAL's and laspy's test files, the 15 ISPRS filter-test
@@ -175,10 +178,12 @@ def describe_scan(points, *, sensor=None, scan_angle=None, random_state=0):
         if not hasattr(random_state, "randint")
         else random_state.randint(2**31)
     )
-    sample = xyz[np.sort(rng.choice(len(xyz), min(len(xyz), _SAMPLE), replace=False))]
+    # a draw that points appended to the cloud (far outliers) leave as it was
+    drawn = stable_draw(len(xyz), min(len(xyz), _SAMPLE), rng)
+    sample = xyz[np.sort(drawn)]
     spacing = point_spacing(xyz, max_points=_SAMPLE, random_state=0)
     vertical = _vertical_fraction(xyz, sample[:_SHAPE_SAMPLE])
-    concentration, centre = _concentration(sample, rng)
+    concentration, centre = _concentration(sample, xyz[drawn[:_CENTRES], :2])
     measured = {
         "spacing": float(spacing),
         "vertical": vertical,
@@ -223,13 +228,13 @@ def _vertical_fraction(xyz, queries):
     return float((vertical & planar).sum() / max(int(planar.sum()), 1))
 
 
-def _concentration(sample, rng):
-    """Median horizontal distance of the points to the one of 200 of them
+def _concentration(sample, candidates):
+    """Median horizontal distance of the points to the candidate (x, y)
     around which that median is smallest, over the 95 % quantile of the
-    distances to it; and that point's x and y."""
+    distances to it; and that candidate."""
     xy = sample[:, :2]
-    best, ratio, centre = np.inf, 1.0, xy[0]
-    for c in xy[rng.choice(len(xy), min(len(xy), 200), replace=False)]:
+    best, ratio, centre = np.inf, 1.0, candidates[0]
+    for c in candidates:
         d = np.hypot(*(xy - c).T)
         median = np.median(d)
         if median < best:

@@ -593,13 +593,23 @@ def _kind_names(kinds):
 
 
 # The check of an automatic eps: a segment whose horizontal bounding box
-# covers more than this fraction of the scene's, and more than
+# covers more than this fraction of the scene's (between the 0.1 and 99.9 %
+# quantiles of x and y, see _robust_extent), and more than
 # _MERGED_AREA square units, joined what should be apart (a whole tile as
 # one object); the radius is then halved, at most _MERGED_RETRIES times and
 # not below twice the point spacing.
 _MERGED_FRACTION = 0.5
 _MERGED_AREA = 2500.0
 _MERGED_RETRIES = 4
+
+
+def _robust_extent(xyz):
+    """Horizontal extent (dx, dy) of the scene between the 0.1 and 99.9 %
+    quantiles of x and y, so that a few far outliers do not widen it."""
+    if not len(xyz):
+        return np.zeros(2)
+    low, high = np.quantile(xyz[:, :2], [0.001, 0.999], axis=0)
+    return high - low
 
 
 def _largest_box(xyz, labels):
@@ -635,7 +645,8 @@ def _cluster_rest(
     seg = _segment_rest(xyz, is_ground, eps=eps, sweep=sweep, **kw)
     if eps is not None or method != "dbscan" or seg.n_segments == 0:
         return seg
-    scene = np.ptp(xyz[:, :2], axis=0).prod() if len(xyz) else 0.0
+    extent = _robust_extent(xyz)
+    scene = extent.prod()
     first, floor, merged = seg.eps, None, None
     for _ in range(_MERGED_RETRIES):
         ext, area = _largest_box(xyz, seg.labels)
@@ -652,8 +663,8 @@ def _cluster_rest(
     if seg.eps != first:
         warnings.warn(
             f"the automatic eps {first:.3g} joined a segment of {merged[0]:.4g} x "
-            f"{merged[1]:.4g} in a scene of {np.ptp(xyz[:, 0]):.4g} x "
-            f"{np.ptp(xyz[:, 1]):.4g}: eps {seg.eps:.3g} used instead; set eps "
+            f"{merged[1]:.4g} in a scene of {extent[0]:.4g} x "
+            f"{extent[1]:.4g}: eps {seg.eps:.3g} used instead; set eps "
             "(--eps) to choose the radius",
             SegmentationWarning,
             stacklevel=3,

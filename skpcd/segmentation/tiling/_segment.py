@@ -22,6 +22,7 @@ from skpcd.segmentation._dbscan import (
     AutoEpsDBSCAN,
     eps_from_knee,
     fit_knee,
+    kdist_mean,
     sample_queries,
 )
 from skpcd.segmentation._structures import segment_structures
@@ -568,7 +569,7 @@ def _estimate_eps(
             scene, tiles, ground, np.concatenate(far_xyz),
             np.concatenate(far_bounds), k_max + 1, n_jobs,
         )  # fmt: skip
-    mean = dist[:, 1:].mean(axis=0)
+    mean = kdist_mean(dist[:, 1:])
     _, _, knee_distance = fit_knee(np.arange(1, k_max + 1), mean, est.degree)
     # as AutoEpsDBSCAN._estimate (test_tiling checks the two estimates agree)
     return eps_from_knee(knee_distance, est.eps_scale)
