@@ -13,7 +13,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from skpcd.cli import main
 from skpcd.io import read_point_cloud, write_point_cloud
@@ -43,7 +42,6 @@ def _wait_for(path, timeout=10):
     return path.is_file()
 
 
-@pytest.mark.slow
 def test_label_session_on_a_simulated_street(tmp_path, browser, downloads):
     from PIL import Image
     from selenium.webdriver.common.action_chains import ActionChains
