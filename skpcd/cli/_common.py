@@ -63,11 +63,13 @@ _OPTIONS = {
     "trust_pickle": ("trust_pickle", "--trust-pickle"),
     "skip_unreadable": ("skip_unreadable", "--skip-unreadable"),
 }
+# (not inside a path: no slash or dot-extension next to the word)
 _KEYWORD = re.compile(
-    r"\b(?P<name>[a-z][a-z_]*)=(?P<value>'[^']*'|\"[^\"]*\"|-?[\w.]*\w)"
+    r"(?<![\w/.\\-])(?P<name>[a-z][a-z_]*)="
+    r"(?P<value>'[^']*'|\"[^\"]*\"|-?[\w.]*\w)(?![/\\])"
 )
 _PARAMETER = re.compile(r"\bThe '(?P<name>\w+)' parameter of \w+")
-_BARE = re.compile(r"\b(?P<name>[a-z]+_[a-z_]+)\b(?!=)")
+_BARE = re.compile(r"(?<![\w/.\\-])(?P<name>[a-z]+_[a-z_]+)(?![\w=/\\-]|\.\w)")
 
 
 def cli_spelling(message, args):
@@ -229,8 +231,10 @@ def supervised(command, work):
     is killed, its temporary outputs are removed from the journal, and one
     line says so. Temporary files of the child in the default temporary
     folder go too: it gets a folder of its own. A child that dies of
-    anything else (a crash) is reported in one line, status 1. Without
-    ``os.fork`` (Windows) the work runs in this process.
+    anything else (a crash) is reported in one line, status 1. Once the
+    child has ended, SIGINT and SIGTERM are ignored (the command exits with
+    the work's status). Without ``os.fork`` (Windows) the work runs in
+    this process.
 
     Returns
     -------
@@ -269,6 +273,9 @@ def supervised(command, work):
         return _outcome(command, status, caught)
     finally:
         _remove_partials(journal, scratch)
+        # the work has ended: a signal now would only kill the exit
+        for signum in catchable:
+            signal.signal(signum, signal.SIG_IGN)
 
 
 def _child(work, journal_fd, scratch, catchable):
@@ -283,6 +290,7 @@ def _child(work, journal_fd, scratch, catchable):
     try:
         for signum in catchable:
             signal.signal(signum, signal.default_int_handler)
+        _end_with_parent()
         _interrupts.start_journal(journal_fd)
         tempfile.tempdir = scratch
         os.environ["TMPDIR"] = scratch
@@ -302,6 +310,21 @@ def _child(work, journal_fd, scratch, catchable):
             with contextlib.suppress(Exception):
                 stream.flush()
         os._exit(status)
+
+
+def _end_with_parent():
+    """On Linux, SIGTERM to this (work) process when the supervising one
+    dies, even of SIGKILL: the work then cleans up and ends instead of
+    running on unseen."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    parent = os.getppid()
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PDEATHSIG
+    if os.getppid() != parent:  # it died before prctl
+        os.kill(os.getpid(), signal.SIGTERM)
 
 
 def _stop(pid, signum):
@@ -418,8 +441,8 @@ def add_skip_unreadable(parser):
 def check_output(path, args, command, *, inputs=()):
     """The output file ``path``, refused before any work when it exists
     without ``--overwrite``, is a folder, lies in no folder, is one of
-    ``inputs`` (whatever the flags), lies inside the FOLDER of segments
-    the command reads (``args.folder``: a next run would read it), or
+    ``inputs`` (whatever the flags), would be read as a segment of the
+    FOLDER the command reads (``args.folder``: a CSV in it, say), or
     cannot be written (a read-only folder, a full disk: an OSError naming
     it)."""
     out = Path(path)
@@ -431,20 +454,36 @@ def check_output(path, args, command, *, inputs=()):
         )
     check_not_an_input(out, command, inputs)
     folder = getattr(args, "folder", None)
-    if folder is not None and Path(folder).is_dir():
-        if out.resolve().is_relative_to(Path(folder).resolve()):
-            raise CommandError(
-                command,
-                f"the output {out} is inside {folder}, the folder of segments "
-                "read: the next run would read it as a segment; write it "
-                "elsewhere",
-            )
+    if folder is not None and _read_as_a_segment(out, folder):
+        if out.exists():
+            raise CommandError(command, f"the output {out} is an input file")
+        raise CommandError(
+            command,
+            f"the output {out} is inside {folder}, the folder of segments "
+            "read: the next run would read it as a segment; write it elsewhere",
+        )
     if out.exists() and not args.overwrite:
         raise CommandError(command, f"{out} exists; pass --overwrite to replace it")
     from skpcd.io._atomic import check_writable
 
     check_writable(out)
     return out
+
+
+def _read_as_a_segment(out, folder):
+    """Whether reading the folder of segments ``folder`` would read the
+    file ``out`` (a point-cloud extension, in the folder itself, not
+    hidden, not labels.csv or segments.csv)."""
+    from skpcd.io._api import SUPPORTED_EXTENSIONS
+    from skpcd.io._segment_folder import SEGMENTS_SUMMARY
+
+    return (
+        Path(folder).is_dir()
+        and out.resolve().parent == Path(folder).resolve()
+        and out.suffix.lower() in SUPPORTED_EXTENSIONS
+        and not out.name.startswith(".")
+        and out.name not in ("labels.csv", SEGMENTS_SUMMARY)
+    )
 
 
 def check_not_an_input(out, command, inputs):

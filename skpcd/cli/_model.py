@@ -103,6 +103,7 @@ def add_parsers(sub):
 def run_fit(args):
     from skpcd.classification import PIPELINES, make_named_pipeline
     from skpcd.io import save_model
+    from skpcd.utils._progress import stage
 
     out = check_output(args.output, args, "fit", inputs=[labels_path(args)])
     clouds, y, source, inputs = load_labelled(args)
@@ -122,7 +123,8 @@ def run_fit(args):
     if args.simulate is not None:
         model = _augmented(model, args)
     start = time.perf_counter()
-    model.fit(clouds, y)
+    with stage("fitting"):  # its elapsed time, on a terminal
+        model.fit(clouds, y)
     print(f"fit       {time.perf_counter() - start:.1f} s")
     if args.simulate is not None:
         print(
