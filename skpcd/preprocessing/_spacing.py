@@ -3,7 +3,7 @@
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["point_spacing"]
+__all__ = ["point_spacing", "tree_spacing"]
 
 
 def point_spacing(
@@ -51,7 +51,17 @@ def point_spacing(
     xyz = points[:, :3]
     if len(xyz) < 2:
         return float("nan")
-    tree = cKDTree(xyz)
+    return tree_spacing(
+        cKDTree(xyz), quantile=quantile, max_points=max_points,
+        random_state=random_state, workers=workers,
+    )  # fmt: skip
+
+
+def tree_spacing(tree, *, quantile=0.5, max_points=200_000, random_state=0, workers=1):
+    """:func:`point_spacing` of the points of a k-d tree already built
+    (``tree.data``, at least two), for a caller that queries the tree for
+    other things too."""
+    xyz = tree.data
     queries = xyz
     if len(xyz) > max_points:
         rng = np.random.default_rng(

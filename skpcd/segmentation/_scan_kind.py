@@ -7,7 +7,7 @@ import typing
 import numpy as np
 from scipy.spatial import cKDTree
 
-from skpcd.preprocessing import point_spacing
+from skpcd.preprocessing._spacing import tree_spacing
 from skpcd.segmentation._dbscan import stable_draw
 
 __all__ = ["SCAN_KINDS", "ScanKind", "describe_scan", "sweep_coordinates"]
@@ -181,8 +181,10 @@ def describe_scan(points, *, sensor=None, scan_angle=None, random_state=0):
     # a draw that points appended to the cloud (far outliers) leave as it was
     drawn = stable_draw(len(xyz), min(len(xyz), _SAMPLE), rng)
     sample = xyz[np.sort(drawn)]
-    spacing = point_spacing(xyz, max_points=_SAMPLE, random_state=0)
-    vertical = _vertical_fraction(xyz, sample[:_SHAPE_SAMPLE])
+    tree = cKDTree(xyz)  # one tree for the spacing and the vertical surfaces
+    spacing = tree_spacing(tree, max_points=_SAMPLE, random_state=0)
+    vertical = _vertical_fraction(tree, sample[:_SHAPE_SAMPLE])
+    del tree
     concentration, centre = _concentration(sample, xyz[drawn[:_CENTRES], :2])
     measured = {
         "spacing": float(spacing),
@@ -216,11 +218,13 @@ def describe_scan(points, *, sensor=None, scan_angle=None, random_state=0):
     return ScanKind("profiler", "points spread along a path", **measured)
 
 
-def _vertical_fraction(xyz, queries):
+def _vertical_fraction(tree, queries):
     """Fraction of the planar neighbourhoods (12 nearest neighbours of the
-    queries) whose normal is within 17 degrees of the horizontal."""
+    queries among the points of the k-d tree ``tree``) whose normal is
+    within 17 degrees of the horizontal."""
+    xyz = tree.data
     k = min(12, len(xyz))
-    _, idx = cKDTree(xyz).query(queries, k=k)
+    _, idx = tree.query(queries, k=k)
     nb = xyz[idx] - xyz[idx].mean(axis=1, keepdims=True)
     values, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb))
     planar = (values[:, 1] - values[:, 0]) > 0.3 * np.maximum(values[:, 2], 1e-300)
