@@ -13,6 +13,10 @@ import math
 
 import numpy as np
 
+# the classes measured as poles (lean, height of what they carry): the
+# pole-like classes of the street simulator and the shipped model
+from skpcd.datasets._street._catalogue import POLE_CLASSES
+
 __all__ = [
     "INVENTORY_COLUMNS",
     "POLE_CLASSES",
@@ -21,16 +25,6 @@ __all__ = [
     "segment_geometry",
 ]
 
-#: The classes measured as poles (lean, height of what they carry): the
-#: pole-like classes of the street simulator and the shipped model.
-POLE_CLASSES = (
-    "pole",
-    "lamp_post",
-    "street_light",
-    "traffic_light",
-    "pedestrian_signal",
-    "traffic_sign",
-)
 
 #: The columns of an inventory, in order.
 INVENTORY_COLUMNS = (

@@ -16,23 +16,19 @@ import numpy as np
 
 from skpcd.datasets._street._primitives import Parts, rot_x, rot_y, rot_z
 
-__all__ = ["BUILDERS", "OBJECT_CLASSES", "building", "wire"]
+__all__ = ["BUILDERS", "OBJECT_CLASSES", "POLE_CLASSES", "building", "wire"]
 
-# classes of objects a scene is made of (ground, facade and wire besides)
-OBJECT_CLASSES = (
+# the pole-like classes: a pole, and what it carries
+POLE_CLASSES = (
     "pole",
     "lamp_post",
     "street_light",
     "traffic_light",
     "pedestrian_signal",
     "traffic_sign",
-    "tree",
-    "car",
-    "bush",
-    "other",
-    "fence",
-    "person",
 )
+# classes of objects a scene is made of (ground, facade and wire besides)
+OBJECT_CLASSES = (*POLE_CLASSES, "tree", "car", "bush", "other", "fence", "person")
 
 
 def _u(rng, lo, hi):
