@@ -4,6 +4,7 @@ labelled folders, and the way a command ends (errors, warnings, interrupts).
 
 import contextlib
 import functools
+import io
 import os
 import re
 import signal
@@ -205,13 +206,25 @@ def run(command, func, args):
             signal.signal(signum, handler)
 
 
+class _Discard(io.TextIOBase):
+    """A text stream that keeps nothing. It has no file descriptor, so code
+    silencing descriptor 1 itself (the C++ messages of the cloth
+    simulation) still finds the real one."""
+
+    def writable(self):
+        return True
+
+    def write(self, text):
+        return len(text)
+
+
 @contextlib.contextmanager
 def _no_stdout(active):
     """Standard output thrown away while ``active``."""
     if not active:
         yield
         return
-    with open(os.devnull, "w") as devnull, contextlib.redirect_stdout(devnull):
+    with contextlib.redirect_stdout(_Discard()):
         yield
 
 
