@@ -261,7 +261,7 @@ def default_buffer(tile_size, ground, eps, structures):
     return 1.01 * max(need) + 1e-6
 
 
-def _stitch(tiled, labels, chunk_size, size_range, exact):
+def _stitch(tiled, labels, chunk_size, size_range, exact, folder):
     """Join the segments of the tiles and number them as untiled.
 
     ``tiled`` yields ``((index, owned), (own_labels, shared, shared_labels,
@@ -275,33 +275,47 @@ def _stitch(tiled, labels, chunk_size, size_range, exact):
     its owner leaves out links nothing. Segments outside ``size_range``
     are dropped; the others are numbered in the order of their first
     point. Returns the kind of each segment: that of the tile's segment
-    holding most of its points."""
+    holding most of its points.
+
+    The shared points of all tiles (a share of the scan that grows with
+    it) go to a file in ``folder`` as the tiles come, and are read back in
+    chunks of ``chunk_size`` as the pairs of segments they link (see
+    :func:`_link_pairs`); memory holds one tile's and the pairs."""
     n = len(labels)
-    n_local, links, local_kinds, local_owned, tile_sizes = 0, [], [], [], []
-    for (index, owned), (own_labels, shared, shared_labels, kinds) in tiled:
-        labels[index[owned]] = np.where(own_labels >= 0, own_labels + n_local, -1)
-        links.append(np.column_stack([index[shared], shared_labels + n_local]))
-        n_top = max(int(own_labels.max(initial=-1)), int(shared_labels.max(initial=-1)))
-        if kinds is not None:
-            n_top = max(n_top, len(kinds) - 1)
-        local_kinds.append(
-            np.zeros(n_top + 1, np.int8) if kinds is None else kinds[: n_top + 1]
-        )
-        local_owned.append(
-            np.bincount(own_labels[own_labels >= 0], minlength=n_top + 1)
-        )
-        n_local += n_top + 1
-        tile_sizes.append(n_top + 1)
+    n_local, local_kinds, local_owned, tile_sizes = 0, [], [], []
+    path = Path(folder) / "links.bin"
+    n_links = 0
+    with open(path, "wb") as f:
+        for (index, owned), (own_labels, shared, shared_labels, kinds) in tiled:
+            labels[index[owned]] = np.where(own_labels >= 0, own_labels + n_local, -1)
+            np.column_stack([index[shared], shared_labels + n_local]).astype(
+                np.int64, copy=False
+            ).tofile(f)
+            n_links += len(shared)
+            n_top = max(
+                int(own_labels.max(initial=-1)), int(shared_labels.max(initial=-1))
+            )
+            if kinds is not None:
+                n_top = max(n_top, len(kinds) - 1)
+            local_kinds.append(
+                np.zeros(n_top + 1, np.int8) if kinds is None else kinds[: n_top + 1]
+            )
+            local_owned.append(
+                np.bincount(own_labels[own_labels >= 0], minlength=n_top + 1)
+            )
+            n_local += n_top + 1
+            tile_sizes.append(n_top + 1)
     # union of the segments through their shared points
-    links = np.concatenate(links) if links else np.zeros((0, 2), np.int64)
-    other = labels[links[:, 0]] if len(links) else np.zeros(0, np.int64)
-    if exact and np.any(other < 0):  # pragma: no cover - the buffer rule forbids it
-        raise RuntimeError("a shared core point is not core in its own tile")
-    links, other = links[other >= 0], other[other >= 0]
-    if not exact and len(links):
-        links, other = _mutual(links[:, 1], other, np.cumsum(tile_sizes))
+    links = np.zeros((0, 2), np.int64)
+    if n_links:
+        links = np.memmap(path, dtype=np.int64, mode="r", shape=(n_links, 2))
+    pairs, count = _link_pairs(links, labels, chunk_size, exact)
+    del links
+    path.unlink()
+    if not exact and len(pairs):
+        pairs = _mutual(pairs, count, np.cumsum(tile_sizes))
     graph = coo_matrix(
-        (np.ones(len(links)), (links[:, 1], other)), shape=(n_local, n_local)
+        (np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n_local, n_local)
     )
     _, component = connected_components(graph, directed=False)
     # sizes and first point of each segment, then the size range and the
@@ -336,17 +350,55 @@ def _stitch(tiled, labels, chunk_size, size_range, exact):
     return comp_kind[kept[np.argsort(first[kept], kind="stable")]]
 
 
-def _mutual(mine, theirs, tile_ends):
-    """The links ``(point, segment)`` of the tiles' segments ``mine`` to
-    their owners' segments ``theirs`` (one row per shared point) kept where
-    the two segments hold the most of each other's shared points in that
-    tile: a segment one tile sees whole and another tile splits (or the
-    other way round) is joined to one part, not used to join the parts.
-    Returns ``(links, other)`` as :func:`_stitch` uses them, one row per
-    kept pair."""
-    pairs, count = np.unique(
-        np.column_stack([mine, theirs]), axis=0, return_counts=True
+def _link_pairs(links, labels, chunk_size, exact):
+    """The distinct pairs ``(segment, owner's segment)`` that the shared
+    points link, and how many shared points link each pair.
+
+    ``links`` holds one row ``(point, segment)`` per shared point: its scan
+    index and its segment in the tile that shares it; the owner's segment
+    is ``labels[point]``. Rows whose owner leaves the point out are
+    dropped (with ``exact``, the buffer rule forbids them: a RuntimeError).
+    Read in chunks of ``chunk_size`` rows (``links`` may be a memory map),
+    each chunk reduced to its distinct pairs, so memory holds the pairs,
+    not the rows. Returns ``(pairs, count)``, the pairs sorted as
+    ``np.unique(rows, axis=0)`` sorts them."""
+    parts, counts = [np.zeros((0, 2), np.int64)], [np.zeros(0, np.int64)]
+    held = 0
+    for start in range(0, len(links), chunk_size):
+        rows = np.asarray(links[start : start + chunk_size])
+        other = np.asarray(labels[rows[:, 0]])
+        if exact and np.any(other < 0):  # pragma: no cover - the buffer rule
+            raise RuntimeError("a shared core point is not core in its own tile")
+        keep = other >= 0
+        pairs, count = np.unique(
+            np.column_stack([rows[keep, 1], other[keep]]), axis=0, return_counts=True
+        )
+        parts.append(pairs)
+        counts.append(count)
+        held += len(pairs)
+        if held > chunk_size:
+            parts, counts = _merge_pairs(parts, counts)
+            held = len(parts[0])
+    return tuple(p[0] for p in _merge_pairs(parts, counts))
+
+
+def _merge_pairs(parts, counts):
+    """The distinct pairs of ``parts`` (lists of ``(k, 2)`` arrays) with
+    their ``counts`` summed, as one-element lists."""
+    pairs, inverse = np.unique(np.concatenate(parts), axis=0, return_inverse=True)
+    count = np.bincount(
+        inverse.ravel(), weights=np.concatenate(counts), minlength=len(pairs)
     )
+    return [pairs], [count.astype(np.int64)]
+
+
+def _mutual(pairs, count, tile_ends):
+    """The pairs ``(segment, owner's segment)`` that the shared points link
+    (distinct, sorted, with ``count`` the shared points of each; see
+    :func:`_link_pairs`) kept where the two segments hold the most of each
+    other's shared points in that tile: a segment one tile sees whole and
+    another tile splits (or the other way round) is joined to one part,
+    not used to join the parts. Returns the kept pairs."""
     tile = np.searchsorted(tile_ends, pairs[:, 0], side="right")
     # for each of mine, the owner segment holding most of its shared points
     order = np.lexsort((-count, pairs[:, 0]))
@@ -357,9 +409,7 @@ def _mutual(mine, theirs, tile_ends):
     k = key[order]
     best_theirs = order[np.r_[True, np.any(k[1:] != k[:-1], axis=1)]]
     keep = np.intersect1d(best_mine, best_theirs)
-    return np.column_stack([np.zeros(len(keep), np.int64), pairs[keep, 0]]), pairs[
-        keep, 1
-    ]
+    return pairs[keep]
 
 
 # The structures step on tiles: each tile segments its points within
@@ -702,6 +752,7 @@ def segment_tiled(
                 chunk_size,
                 (min_cluster_size, max_cluster_size),
                 exact=structures is None,
+                folder=out,
             )
         result = (
             detach(labels, out / "labels.npy"),

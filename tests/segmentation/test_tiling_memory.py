@@ -1,0 +1,68 @@
+"""The tiled path holds the tiles, not the scan: what grows with the scan
+(the points the tiles share, the per-point results) stays on disk."""
+
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from skpcd.segmentation.tiling._segment import _link_pairs, _stitch
+
+
+def _chain(n_tiles, n_own, n_shared):
+    """Tiles of ``n_own`` consecutive points, one segment each, each sharing
+    the first ``n_shared`` points of the next tile (as DBSCAN's core points
+    in its buffer), made one at a time as the tiled path makes them."""
+    for t in range(n_tiles):
+        own = np.arange(t * n_own, (t + 1) * n_own)
+        more = n_shared if t + 1 < n_tiles else 0
+        index = np.concatenate([own, own[:more] + n_own])
+        owned = np.arange(len(index)) < n_own
+        shared = np.arange(n_own, n_own + more)
+        yield (
+            (index, owned),
+            (np.zeros(n_own, np.int64), shared, np.zeros(more, np.int64), None),
+        )
+
+
+@pytest.mark.parametrize("exact", [True, False])
+def test_stitch_holds_the_segment_pairs_not_the_shared_points(tmp_path, exact):
+    # 39 x 50 000 shared points: 31 MB as (point, segment) rows in memory
+    n_tiles, n_own, n_shared = 40, 60_000, 50_000
+    labels = np.full(n_tiles * n_own, -1, dtype=np.int64)
+    tracemalloc.start()
+    try:
+        kinds = _stitch(
+            _chain(n_tiles, n_own, n_shared), labels, 100_000, (1, None), exact,
+            tmp_path,
+        )  # fmt: skip
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    # the chain is one segment, the shared points' file is gone
+    assert np.array_equal(labels, np.zeros_like(labels))
+    assert len(kinds) == 1
+    assert list(tmp_path.iterdir()) == []
+    # a tile (1.8 MB of indices, 0.5 MB of labels) and chunks of 100 000 rows
+    assert peak < 12e6, peak
+
+
+@pytest.mark.parametrize("chunk_size", [1, 7, 1000, 10**6])
+def test_link_pairs_in_chunks_are_the_unique_rows(chunk_size):
+    rng = np.random.default_rng(0)
+    labels = rng.integers(-1, 5, 400)
+    links = np.column_stack([rng.integers(0, 400, 3000), rng.integers(0, 9, 3000)])
+    pairs, count = _link_pairs(links, labels, chunk_size, exact=False)
+    other = labels[links[:, 0]]
+    rows = np.column_stack([links[:, 1], other])[other >= 0]
+    want, want_count = np.unique(rows, axis=0, return_counts=True)
+    assert np.array_equal(pairs, want)
+    assert np.array_equal(count, want_count)
+    assert count.dtype == np.int64
+
+
+def test_link_pairs_of_no_shared_point():
+    pairs, count = _link_pairs(
+        np.zeros((0, 2), np.int64), np.zeros(3, np.int64), 5, True
+    )
+    assert pairs.shape == (0, 2) and count.shape == (0,)
