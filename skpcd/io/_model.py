@@ -16,24 +16,29 @@ skops does not trust by itself is in ``TRUSTED_TYPES``, and its structure
 is checked: the node indices of its decision trees, which scikit-learn would
 follow out of bounds, and the sizes its parts share (features, outputs and
 classes of trees and their ensembles, ``classes_`` against ``n_classes_``,
-the width of each pipeline step against the next). A joblib payload, and the bare joblib pickles that skpcd wrote
-before this format, run code from the file when loaded: they need
-``trust_pickle=True``.
+the width of each pipeline step against the next). A joblib payload, and
+the bare joblib pickles that skpcd wrote before this format, run code from
+the file when loaded: they need ``trust_pickle=True``.
 """
 
+import contextvars
 import hashlib
+import importlib
 import io
 import itertools
 import json
 import os
 import platform
+import re
 import struct
+import sys
 import zipfile
 from pathlib import Path
 
 import joblib
 import numpy as np
 import sklearn
+import sklearn.utils
 from sklearn.base import BaseEstimator
 
 from skpcd import __version__
@@ -155,11 +160,12 @@ def _serialise(model, format):
         return buffer.getvalue(), "joblib"
 
     import skops
-    import skops.io
+
+    skops_io = _skops_io()
 
     try:
         # deflated: the JSON schema of a 300-tree forest shrinks 14-fold
-        payload = skops.io.dumps(model, compression=zipfile.ZIP_DEFLATED)
+        payload = skops_io.dumps(model, compression=zipfile.ZIP_DEFLATED)
     except Exception as exc:
         raise TypeError(
             f"cannot save a {type(model).__name__} in the skops format "
@@ -385,17 +391,144 @@ def _read_container(path, fh, size, *, trust_pickle, check_versions):
 
 def _not_allowed(untrusted, trusted):
     allowed = set(TRUSTED_TYPES).union(trusted)
-    return sorted(t for t in untrusted if t not in allowed)
+    return sorted(
+        t for t in untrusted if t not in allowed and not _sklearn_estimator(t)
+    )
+
+
+# skops, when imported, lists every public scikit-learn estimator (the types
+# it trusts by default) with sklearn.utils.all_estimators, which imports every
+# module of scikit-learn: about 1 s of CPU, a third of loading the street
+# model. skpcd imports skops without that list and, for a file it loads,
+# trusts the scikit-learn types that file names which the same rule accepts
+# (_sklearn_estimator, asked of those types only): the trusted set is the
+# one skops would use, built for the few types at hand. For everyone else
+# in the process, skops' list is made as skops makes it, on its first use.
+_OWN_LOAD = contextvars.ContextVar("skpcd_own_skops_load", default=False)
+
+
+class _EstimatorNames(list):
+    """skops' list of scikit-learn estimator type names (its
+    ``SKLEARN_ESTIMATOR_TYPE_NAMES``), made as skops makes it on first use;
+    empty in skpcd's own loads, which give those types in ``trusted``.
+    skops only adds it to another list; reading it fills it too."""
+
+    filled = False
+
+    def _fill(self):
+        if not self.filled:
+            from skops.io._utils import get_type_name
+
+            names = (get_type_name(cls) for _, cls in sklearn.utils.all_estimators())
+            self[:] = [name for name in names if name.startswith("sklearn.")]
+            self.filled = True
+        return self
+
+    def __add__(self, other):
+        if _OWN_LOAD.get():
+            return list(other)
+        return list.__add__(self._fill(), other)
+
+    def __iter__(self):
+        return list.__iter__(self._fill())
+
+    def __len__(self):
+        return list.__len__(self._fill())
+
+    def __contains__(self, item):
+        return list.__contains__(self._fill(), item)
+
+    def __getitem__(self, index):
+        return list.__getitem__(self._fill(), index)
+
+
+def _skops_io():
+    """``skops.io``, imported without its list of every scikit-learn
+    estimator (see ``_EstimatorNames``) when skpcd is the first to import it."""
+    if "skops.io" in sys.modules:
+        return sys.modules["skops.io"]
+    every = sklearn.utils.all_estimators
+    sklearn.utils.all_estimators = lambda *args, **kwargs: []
+    try:
+        import skops.io
+        from skops.io import _general, _trusted_types
+    finally:
+        sklearn.utils.all_estimators = every
+    names = getattr(_trusted_types, "SKLEARN_ESTIMATOR_TYPE_NAMES", None)
+    if names == [] and getattr(_general, "SKLEARN_ESTIMATOR_TYPE_NAMES", None) is names:
+        lazy = _EstimatorNames()
+        _trusted_types.SKLEARN_ESTIMATOR_TYPE_NAMES = lazy
+        _general.SKLEARN_ESTIMATOR_TYPE_NAMES = lazy
+    elif isinstance(names, list) and not names:  # another layout: made now
+        names[:] = _EstimatorNames()._fill()
+    return skops.io
+
+
+# What sklearn.utils.all_estimators leaves out: modules with a part of these
+# names (its _MODULE_TO_IGNORE).
+_NOT_WALKED = {
+    "tests", "externals", "setup", "conftest", "experimental", "estimator_checks",
+}  # fmt: skip
+
+
+def _sklearn_estimator(name):
+    """Whether the type ``name`` is one that skops trusts by default: a
+    class that sklearn.utils.all_estimators lists (a public, non-abstract
+    subclass of BaseEstimator exported under its name by a public module of
+    scikit-learn), found through the public package above the module that
+    defines it. Imports only that public module, as all_estimators would."""
+    module, _, qualname = str(name).rpartition(".")
+    parts = module.split(".")
+    if (
+        parts[0] != "sklearn"
+        or not qualname.isidentifier()
+        or qualname.startswith("_")
+        or not all(part.isidentifier() for part in parts)
+    ):
+        return False
+    public = parts[: next((i for i, p in enumerate(parts) if p.startswith("_")), None)]
+    if _NOT_WALKED.intersection(public):
+        return False
+    try:
+        cls = getattr(importlib.import_module(".".join(public)), qualname, None)
+    except ImportError:
+        return False
+    return (
+        isinstance(cls, type)
+        and cls.__module__ == module
+        and cls.__qualname__ == qualname
+        and issubclass(cls, BaseEstimator)
+        and qualname != "BaseEstimator"
+        and not getattr(cls, "__abstractmethods__", None)
+    )
+
+
+_NAMED = re.compile(rb'"__module__":\s*"(sklearn(?:\.\w+)+)"|"__class__":\s*"(\w+)"')
+
+
+def _sklearn_estimators_named(payload):
+    """The scikit-learn estimator types (see :func:`_sklearn_estimator`)
+    that a skops payload may name: every pair of a scikit-learn module and
+    a class name found in its schema that is one."""
+    with zipfile.ZipFile(io.BytesIO(payload)) as archive:
+        schema = archive.read("schema.json")
+    modules, classes = set(), set()
+    for module, cls in _NAMED.findall(schema):
+        (modules.add(module.decode()) if module else classes.add(cls.decode()))
+    pairs = (f"{m}.{c}" for m in sorted(modules) for c in sorted(classes))
+    return [name for name in pairs if _sklearn_estimator(name)]
 
 
 def _from_skops(path, payload, trusted):
-    import skops.io
+    skops_io = _skops_io()
     from skops.io.exceptions import UntrustedTypesFoundException
 
+    token = _OWN_LOAD.set(True)
     try:
-        return skops.io.loads(payload, trusted=[*TRUSTED_TYPES, *trusted])
+        known = _sklearn_estimators_named(payload)
+        return skops_io.loads(payload, trusted=[*TRUSTED_TYPES, *trusted, *known])
     except UntrustedTypesFoundException:
-        refused = _not_allowed(skops.io.get_untrusted_types(data=payload), trusted)
+        refused = _not_allowed(skops_io.get_untrusted_types(data=payload), trusted)
         raise UntrustedModelError(
             path,
             f"the model names types that skpcd does not trust: {', '.join(refused)}; "
@@ -409,6 +542,8 @@ def _from_skops(path, payload, trusted):
             f"cannot rebuild the model from its skops data ({type(exc).__name__}: "
             f"{exc})",
         ) from exc
+    finally:
+        _OWN_LOAD.reset(token)
 
 
 def _from_joblib(path, source):
@@ -555,8 +690,10 @@ def _check_trees(path, model):
     a scikit-learn error, or answer wrong classes.
     """
     # loaded here: scikit-learn's tree module takes a quarter of a second to import
-    from sklearn.pipeline import Pipeline
     from sklearn.tree._tree import Tree
+
+    # a model holding a pipeline has loaded scikit-learn's pipeline module
+    pipeline = getattr(sys.modules.get("sklearn.pipeline"), "Pipeline", ())
 
     seen, pipelines = set(), []
     stack = [(model, None)]
@@ -578,7 +715,7 @@ def _check_trees(path, model):
             attrs = vars(obj) if hasattr(obj, "__dict__") else {}
             stack.extend((item, obj) for item in attrs.values())
             _check_classes(path, obj, attrs)
-            if isinstance(obj, Pipeline):
+            if isinstance(obj, pipeline):
                 pipelines.append(obj)
             subs = attrs.get("estimators_")
             if "n_features_in_" in attrs and isinstance(subs, list) and not subs:

@@ -678,3 +678,83 @@ def test_sound_ensembles_pass_the_structure_check(tmp_path, multi):
     for model in models:
         back = load_model(save_model(model, tmp_path / "m.skpcd", overwrite=True))
         np.testing.assert_array_equal(back.predict(X), model.predict(X))
+
+
+def test_skops_is_loaded_without_importing_every_estimator(tmp_path):
+    # issue 28 item 4: skops lists every scikit-learn estimator when it is
+    # imported (sklearn.utils.all_estimators imports all of scikit-learn,
+    # a third of the street model's loading time); skpcd needs only those
+    # the file names. Other users of skops in the process still get its list.
+    out = _run(
+        """
+    import json, sys
+    import numpy as np
+    from skpcd.classification import load_street_model
+
+    model = load_street_model()
+    every = ("sklearn.cross_decomposition", "sklearn.semi_supervised")
+    before = [name in sys.modules for name in every]
+    import skops.io
+    from sklearn.linear_model import LogisticRegression
+    from sklearn.utils import all_estimators
+
+    X, y = np.random.default_rng(0).random((30, 3)), np.arange(30) % 2
+    other = LogisticRegression().fit(X, y)
+    back = skops.io.loads(skops.io.dumps(other))  # skops' own default trust
+    names = skops.io._general.SKLEARN_ESTIMATOR_TYPE_NAMES
+    expected = sorted(
+        f"{c.__module__}.{c.__name__}" for _, c in all_estimators()
+        if c.__module__.startswith("sklearn.")
+    )
+    print(json.dumps({
+        "imported": before,
+        "same": bool((back.predict(X) == other.predict(X)).all()),
+        "names": sorted(names) == expected and len(names) > 150,
+    }))
+    """,
+        tmp_path,
+    )
+    result = json.loads(out.strip().splitlines()[-1])
+    assert result == {"imported": [False, False], "same": True, "names": True}
+
+
+def test_trusted_estimators_are_those_of_all_estimators():
+    # the rule skpcd asks of the types a file names agrees with the list
+    # skops makes from sklearn.utils.all_estimators, on every class of every
+    # scikit-learn module
+    import inspect
+    import sys
+
+    from sklearn.utils import all_estimators
+
+    listed = {
+        f"{c.__module__}.{c.__name__}"
+        for _, c in all_estimators()
+        if c.__module__.startswith("sklearn.")
+    }
+    classes = {
+        f"{c.__module__}.{c.__name__}"
+        for name, module in list(sys.modules.items())
+        if name.startswith("sklearn") and module is not None
+        for _, c in inspect.getmembers(module, inspect.isclass)
+    }
+    assert len(classes) > 500 and listed <= classes
+    assert {n for n in classes if m._sklearn_estimator(n)} == listed
+    for name in ("os.system", "sklearn.base.clone", "sklearn.foo.Bar", "sklearn."):
+        assert not m._sklearn_estimator(name)
+
+
+def test_street_model_loads_as_skops_builds_it():
+    # the same model as skops.io.loads with its own default trust builds
+    import skops.io
+
+    from skpcd.classification._street import STREET_MODEL_PATH
+
+    model, info = load_model(STREET_MODEL_PATH, return_info=True, check_versions=False)
+    _, payload = _split(STREET_MODEL_PATH.read_bytes())
+    plain = skops.io.loads(payload, trusted=list(m.TRUSTED_TYPES))
+    clouds = [np.asarray(c, dtype=float) for c in info["metadata"]["probe"]["clouds"]]
+    np.testing.assert_array_equal(
+        model.predict_proba(clouds), plain.predict_proba(clouds)
+    )
+    assert repr(model) == repr(plain)
