@@ -59,8 +59,11 @@ def note(kind, path, *, final=None, old=None):
     if final is not None:
         entry["final"], entry["old"] = os.fspath(final), os.fspath(old)
     if _journal_fd is not None:
-        # one write of less than a page: never seen half written
-        os.write(_journal_fd, (json.dumps(entry) + "\n").encode())
+        # one write of less than a page: never seen half written. A journal
+        # that cannot be written (its temporary folder full) does not stop
+        # the output: only a killed run would leave this one behind.
+        with contextlib.suppress(OSError):
+            os.write(_journal_fd, (json.dumps(entry) + "\n").encode())
     return entry
 
 
