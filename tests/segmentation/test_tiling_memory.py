@@ -6,7 +6,12 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from skpcd.segmentation.tiling._segment import _link_pairs, _stitch
+from skpcd.segmentation._dbscan import sample_queries
+from skpcd.segmentation.tiling._segment import (
+    _link_pairs,
+    _stitch,
+    chunked_sample_queries,
+)
 
 
 def _chain(n_tiles, n_own, n_shared):
@@ -52,7 +57,7 @@ def test_link_pairs_in_chunks_are_the_unique_rows(chunk_size):
     rng = np.random.default_rng(0)
     labels = rng.integers(-1, 5, 400)
     links = np.column_stack([rng.integers(0, 400, 3000), rng.integers(0, 9, 3000)])
-    pairs, count = _link_pairs(links, labels, chunk_size, exact=False)
+    pairs, count = _link_pairs(links, labels, 9, chunk_size, exact=False)
     other = labels[links[:, 0]]
     rows = np.column_stack([links[:, 1], other])[other >= 0]
     want, want_count = np.unique(rows, axis=0, return_counts=True)
@@ -63,6 +68,35 @@ def test_link_pairs_in_chunks_are_the_unique_rows(chunk_size):
 
 def test_link_pairs_of_no_shared_point():
     pairs, count = _link_pairs(
-        np.zeros((0, 2), np.int64), np.zeros(3, np.int64), 5, True
+        np.zeros((0, 2), np.int64), np.zeros(3, np.int64), 0, 5, True
     )
     assert pairs.shape == (0, 2) and count.shape == (0,)
+
+
+@pytest.mark.parametrize(
+    ("n", "max_samples", "chunk_size"),
+    [(10, 3, 2), (1000, 100, 7), (1000, 100, 5000), (50, None, 7), (50, 80, 7)],
+)
+@pytest.mark.parametrize("seed", [0, 7])
+def test_chunked_sample_queries_draws_the_untiled_sample(
+    n, max_samples, chunk_size, seed
+):
+    got = chunked_sample_queries(n, max_samples, seed, chunk_size)
+    assert np.array_equal(got, sample_queries(n, max_samples, seed))
+    # a RandomState instance is consumed as by the untiled draw
+    a, b = np.random.RandomState(seed), np.random.RandomState(seed)
+    chunked_sample_queries(n, max_samples, a, chunk_size)
+    sample_queries(n, max_samples, b)
+    assert a.random() == b.random()
+
+
+def test_chunked_sample_queries_holds_a_chunk_not_the_points():
+    # 5 M non-ground points: 80 MB of keys and ranks drawn at once
+    tracemalloc.start()
+    try:
+        got = chunked_sample_queries(5_000_000, 100_000, 0, 200_000)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert np.array_equal(got, sample_queries(5_000_000, 100_000, 0))
+    assert peak < 15e6, peak

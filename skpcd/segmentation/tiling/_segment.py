@@ -15,6 +15,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
+from sklearn.utils import check_random_state
 
 from skpcd.io._common import check_chunk_size
 from skpcd.segmentation._clusters import EUCLIDEAN_EPS, grid_dbscan
@@ -309,7 +310,7 @@ def _stitch(tiled, labels, chunk_size, size_range, exact, folder):
     links = np.zeros((0, 2), np.int64)
     if n_links:
         links = np.memmap(path, dtype=np.int64, mode="r", shape=(n_links, 2))
-    pairs, count = _link_pairs(links, labels, chunk_size, exact)
+    pairs, count = _link_pairs(links, labels, n_local, chunk_size, exact)
     del links
     path.unlink()
     if not exact and len(pairs):
@@ -350,19 +351,21 @@ def _stitch(tiled, labels, chunk_size, size_range, exact, folder):
     return comp_kind[kept[np.argsort(first[kept], kind="stable")]]
 
 
-def _link_pairs(links, labels, chunk_size, exact):
+def _link_pairs(links, labels, n_local, chunk_size, exact):
     """The distinct pairs ``(segment, owner's segment)`` that the shared
     points link, and how many shared points link each pair.
 
     ``links`` holds one row ``(point, segment)`` per shared point: its scan
     index and its segment in the tile that shares it; the owner's segment
-    is ``labels[point]``. Rows whose owner leaves the point out are
-    dropped (with ``exact``, the buffer rule forbids them: a RuntimeError).
-    Read in chunks of ``chunk_size`` rows (``links`` may be a memory map),
-    each chunk reduced to its distinct pairs, so memory holds the pairs,
-    not the rows. Returns ``(pairs, count)``, the pairs sorted as
-    ``np.unique(rows, axis=0)`` sorts them."""
-    parts, counts = [np.zeros((0, 2), np.int64)], [np.zeros(0, np.int64)]
+    is ``labels[point]``; both segments are below ``n_local``. Rows whose
+    owner leaves the point out are dropped (with ``exact``, the buffer rule
+    forbids them: a RuntimeError). Read in chunks of ``chunk_size`` rows
+    (``links`` may be a memory map), each chunk reduced to its distinct
+    pairs, each pair one int64 key ``segment * n_local + owner's segment``
+    (``n_local`` below 3 billion), so memory holds the pairs, not the rows.
+    Returns ``(pairs, count)``, the pairs sorted as ``np.unique(rows,
+    axis=0)`` sorts them."""
+    keys, counts = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
     held = 0
     for start in range(0, len(links), chunk_size):
         rows = np.asarray(links[start : start + chunk_size])
@@ -370,26 +373,25 @@ def _link_pairs(links, labels, chunk_size, exact):
         if exact and np.any(other < 0):  # pragma: no cover - the buffer rule
             raise RuntimeError("a shared core point is not core in its own tile")
         keep = other >= 0
-        pairs, count = np.unique(
-            np.column_stack([rows[keep, 1], other[keep]]), axis=0, return_counts=True
+        key, count = np.unique(
+            rows[keep, 1] * n_local + other[keep], return_counts=True
         )
-        parts.append(pairs)
+        keys.append(key)
         counts.append(count)
-        held += len(pairs)
+        held += len(key)
         if held > chunk_size:
-            parts, counts = _merge_pairs(parts, counts)
-            held = len(parts[0])
-    return tuple(p[0] for p in _merge_pairs(parts, counts))
+            keys, counts = _merge_keys(keys, counts)
+            held = len(keys[0])
+    (key,), (count,) = _merge_keys(keys, counts)
+    return np.column_stack([key // max(n_local, 1), key % max(n_local, 1)]), count
 
 
-def _merge_pairs(parts, counts):
-    """The distinct pairs of ``parts`` (lists of ``(k, 2)`` arrays) with
-    their ``counts`` summed, as one-element lists."""
-    pairs, inverse = np.unique(np.concatenate(parts), axis=0, return_inverse=True)
-    count = np.bincount(
-        inverse.ravel(), weights=np.concatenate(counts), minlength=len(pairs)
-    )
-    return [pairs], [count.astype(np.int64)]
+def _merge_keys(keys, counts):
+    """The distinct keys of ``keys`` (a list of arrays) with their
+    ``counts`` summed, as one-element lists."""
+    key, inverse = np.unique(np.concatenate(keys), return_inverse=True)
+    count = np.bincount(inverse, weights=np.concatenate(counts), minlength=len(key))
+    return [key], [count.astype(np.int64)]
 
 
 def _mutual(pairs, count, tile_ends):
@@ -568,6 +570,48 @@ def _eps_far_queries(scene, tiles, ground, queries, bounds, k, n_jobs):
     return found
 
 
+def chunked_sample_queries(n, max_samples, random_state, chunk_size):
+    """:func:`~skpcd.segmentation._dbscan.sample_queries`, the same draw,
+    with the ``n`` random keys drawn ``chunk_size`` at a time: the
+    ``max_samples`` smallest keys so far are kept (with the rank of their
+    point) and merged with each new chunk, so memory holds a chunk and the
+    sample, not a key and a rank per non-ground point of the scan. A
+    :class:`numpy.random.RandomState` draws the same keys in chunks as at
+    once; equal keys at the cut (two of ``n`` 53-bit uniforms equal, and at
+    the rank of the ``max_samples``-th) are the one case where the two
+    could keep different points.
+
+    Parameters
+    ----------
+    n : int
+        Points to draw from.
+    max_samples : int or None
+        Points drawn (all ``n`` when None or not fewer than ``n``).
+    random_state : int, RandomState instance or None
+        As :func:`~skpcd.segmentation._dbscan.sample_queries`.
+    chunk_size : int
+        Keys drawn at a time.
+
+    Returns
+    -------
+    ranks : ndarray of shape (n_samples,), dtype int64
+        The ranks drawn, sorted.
+    """
+    if max_samples is None or n <= max_samples:
+        return sample_queries(n, max_samples, random_state)
+    size = int(max_samples)
+    rng = check_random_state(random_state)
+    keys, ranks = np.zeros(0), np.zeros(0, dtype=np.int64)
+    for start in range(0, n, chunk_size):
+        new = rng.random(min(chunk_size, n - start))
+        keys = np.concatenate([keys, new])
+        ranks = np.concatenate([ranks, np.arange(start, start + len(new))])
+        if len(keys) > size:
+            first = np.argpartition(keys, size - 1)[:size]
+            keys, ranks = keys[first], ranks[first]
+    return np.sort(ranks)
+
+
 def _estimate_eps(
     scene, tiles, ground, min_samples, eps_scale, random_state, n_jobs,
     chunk_size,
@@ -591,7 +635,7 @@ def _estimate_eps(
     if n < 2:
         return 0.0
     k_max = min(int(est.n_neighbors), n - 1)
-    ranks = sample_queries(n, est.max_samples, random_state)
+    ranks = chunked_sample_queries(n, est.max_samples, random_state, chunk_size)
     # scan index of each query: its rank among the non-ground points
     queries, seen = [], 0
     for start in range(0, scene.n_points, chunk_size):
