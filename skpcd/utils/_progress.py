@@ -12,12 +12,12 @@ import contextlib
 import sys
 import threading
 
-__all__ = ["progress", "reporting", "silenced", "stage"]
+__all__ = ["progress", "reporting", "silenced", "stage", "steps"]
 
 # seconds between two redraws of a stage's elapsed time
 _TICK = 0.5
 # set by reporting() and silenced()
-_state = {"report": False, "silent": False}
+_state = {"report": False, "silent": False, "loops": 0}
 
 
 def _enabled(enabled, stream):
@@ -28,7 +28,7 @@ def _enabled(enabled, stream):
     return bool(enabled)
 
 
-def progress(iterable, *, total=None, desc="", enabled=None, stream=None):
+def progress(iterable, *, total=None, desc="", enabled=None, stream=None, leave=True):
     """Iterate over ``iterable`` while drawing a progress bar with its ETA.
 
     Parameters
@@ -44,6 +44,8 @@ def progress(iterable, *, total=None, desc="", enabled=None, stream=None):
         Never drawn inside :func:`silenced`.
     stream : file-like, default=None
         Where to draw; standard error by default.
+    leave : bool, default=True
+        Keep the finished bar on its line; False erases it.
 
     Returns
     -------
@@ -56,8 +58,45 @@ def progress(iterable, *, total=None, desc="", enabled=None, stream=None):
     from tqdm import tqdm
 
     return tqdm(
-        iterable, total=total, desc=desc, file=stream, mininterval=0.2, leave=True
+        iterable, total=total, desc=desc, file=stream, mininterval=0.2, leave=leave
     )
+
+
+def steps(iterable, desc, *, total=None, stream=None):
+    """Progress of a loop of the library (the tiles of a pass): a bar with
+    its ETA, erased when the loop ends, drawn only inside
+    :func:`reporting`, from the main thread, on a terminal. The
+    :func:`stage` steps inside the loop (a ground filter per tile) are not
+    drawn meanwhile.
+
+    Parameters
+    ----------
+    iterable : iterable
+        What to iterate over.
+    desc : str
+        Label printed before the bar.
+    total : int, default=None
+        Number of items; taken from ``len(iterable)`` when possible.
+    stream : file-like, default=None
+        Where to draw; standard error by default.
+
+    Yields
+    ------
+    item
+        The items of ``iterable``, unchanged.
+    """
+    stream = sys.stderr if stream is None else stream
+    main = threading.current_thread() is threading.main_thread()
+    if not (_state["report"] and main and _enabled(None, stream)):
+        yield from iterable
+        return
+    _state["loops"] += 1
+    try:
+        yield from progress(
+            iterable, total=total, desc=desc, enabled=True, stream=stream, leave=False
+        )
+    finally:
+        _state["loops"] -= 1
 
 
 @contextlib.contextmanager
@@ -87,7 +126,7 @@ def stage(desc, *, enabled=None, stream=None):
     if enabled is None and not _state["report"]:
         enabled = False
     main = threading.current_thread() is threading.main_thread()
-    if not main or not _enabled(enabled, stream):
+    if not main or _state["loops"] or not _enabled(enabled, stream):
         yield
         return
     from tqdm import tqdm

@@ -267,6 +267,27 @@ def test_progress_draws_a_bar_with_its_eta_and_stages_their_time():
     assert stream.getvalue() == ""
 
 
+class _Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_library_loops_draw_only_for_the_command():
+    from skpcd.utils._progress import reporting, steps
+
+    stream = _Terminal()
+    assert list(steps(range(3), "tiles (cloth)", stream=stream)) == [0, 1, 2]
+    assert stream.getvalue() == ""  # a script calling the library sees nothing
+    with reporting():
+        for _ in steps(range(3), "tiles (cloth)", stream=stream):
+            with stage("GroundFilter (csf)", stream=stream):  # not drawn inside
+                pass
+    drawn = stream.getvalue()
+    assert "tiles (cloth):" in drawn and "0/3 [" in drawn  # a count, an ETA
+    assert drawn.rstrip("\r").endswith(" ")  # erased when the loop ends
+    assert "GroundFilter" not in drawn
+
+
 def _on_a_terminal(argv, cwd):
     """``python -m skpcd argv`` with stderr on a pseudo-terminal of 100
     columns; returns (status, stdout, what the terminal showed)."""

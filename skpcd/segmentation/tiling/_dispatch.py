@@ -25,6 +25,7 @@ from skpcd.utils._parallel import (
     effective_threads,
     run_batch,
 )
+from skpcd.utils._progress import steps
 
 __all__ = ["map_tiles", "shares_files"]
 
@@ -153,6 +154,8 @@ def map_tiles(scene, tiles, prepare, pargs, compute, cargs, n_jobs, ground=None)
     """
 
     flags, flags_path = (None, None) if ground is None else ground
+    name = compute.__name__.strip("_").removesuffix("_tile")
+    tiles = steps(tiles, f"tiles ({name})")  # a bar on the command's terminal
 
     def here(t, n_threads):
         xyz, index = scene.load(t)
