@@ -18,19 +18,41 @@ tiling alone):
 
 Results: ``benchmarks/results/tiles.{json,txt}``, with the commit, machine
 and date of the run.
+
+With ``--memory SCAN [SCAN ...]``, the memory of the whole tiled job
+``skpcd segment SCAN -o FOLDER --tile-size 100`` (its defaults otherwise),
+each scan in a fresh process: the anonymous memory (``RssAnon``: what
+cannot be dropped; the memory-mapped result arrays and the page cache are
+not in it) sampled every 20 ms, its peak in each phase of the job (the
+scan's kind told from a sample, the spill of the scan to tile files, the
+ground, the eps estimate, the tiles' segmentation, the stitching of their
+segments, the writing of the segment files), and the peak RSS of the
+process (``VmHWM``, mapped files included). ``--streets SCAN`` first
+writes, beside SCAN, copies of it end to end along x (300 m apart: every
+100 m tile of a copy holds the same points as in the first), so that the
+memory at a fixed tile content can be read against the scan's size::
+
+    python benchmarks/bench_tiles.py --memory scan_10M.las scan_25M.las \
+        scan_50M.las --streets scan_10M.las --out benchmarks/results/tiles_memory.json
+
+(the scans of ``bench_throughput.make_scans``; the SCAN of ``--streets``
+must span less than 200 m along x). Results:
+``benchmarks/results/tiles_memory.{json,txt}``.
 """
 
 import argparse
 import json
 import os
+import subprocess
 import sys
 import tempfile
+import threading
 import time
 import warnings
 from pathlib import Path
 
 import numpy as np
-from measure import provenance
+from measure import provenance, write_results
 from sklearn.metrics import adjusted_rand_score
 
 from skpcd.io import read_point_cloud
@@ -131,12 +153,236 @@ def write(results, out):
     out.with_suffix(".txt").write_text("\n".join(lines) + "\n")
 
 
+# --- the memory of a tiled job, phase by phase -----------------------------
+
+# The compute step of each pass of the tiled path, and the phase it is in.
+PHASES = {
+    "_ground_tile": "ground",
+    "_cloth_tile": "ground",
+    "_bases_tile": "ground",
+    "_eps_tile": "eps",
+    "_far_tile": "eps",
+    "_cluster_tile": "tiles",
+    "_structures_tile": "tiles",
+}
+ORDER = ("kind", "spill", "ground", "eps", "tiles", "stitch", "write")
+MEMORY_TILE = 100.0
+
+
+def _status():
+    """RssAnon, RssFile and VmHWM of this process, in MiB."""
+    out = {}
+    with open("/proc/self/status") as f:
+        for line in f:
+            key, _, value = line.partition(":")
+            if key in ("RssAnon", "RssFile", "VmHWM"):
+                out[key] = int(value.split()[0]) / 1024
+    return out
+
+
+class PhaseSampler:
+    """The peak RssAnon and RssFile of each phase, sampled in a thread."""
+
+    def __init__(self):
+        self.phase = "start"
+        self.peaks = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+
+    def sample(self):
+        s = _status()
+        peak = self.peaks.setdefault(self.phase, {"anon_mib": 0.0, "file_mib": 0.0})
+        peak["anon_mib"] = max(peak["anon_mib"], s["RssAnon"])
+        peak["file_mib"] = max(peak["file_mib"], s["RssFile"])
+
+    def enter(self, phase):
+        self.sample()
+        self.phase = phase
+        self.sample()
+
+    def _loop(self):
+        while not self._stop.wait(0.02):
+            self.sample()
+
+    def start(self):
+        self._thread.start()
+
+    def stop(self):
+        self._stop.set()
+        self._thread.join()
+        self.sample()
+
+
+def _watch_phases(sampler, facts):
+    """Patch the tiled path so that ``sampler`` knows the phase it is in;
+    ``facts`` gets the tiles' sizes."""
+    import skpcd.segmentation as segmentation
+    import skpcd.segmentation.tiling._segment as seg
+
+    tile_scene, csf, stitch, map_tiles = (
+        seg.tile_scene, seg._csf_tiled, seg._stitch, seg.map_tiles
+    )  # fmt: skip
+    segment_scene = segmentation.segment_scene
+
+    def spill(*args, **kwargs):
+        sampler.enter("spill")
+        scene = tile_scene(*args, **kwargs)
+        facts["n_points"] = int(scene.n_points)
+        facts["n_tiles"] = int((scene.owned_counts() > 0).sum())
+        facts["largest_tile"] = int(scene.counts.max())
+        return scene
+
+    def cloth(*args, **kwargs):
+        sampler.enter("ground")
+        return csf(*args, **kwargs)
+
+    def mapped(scene, tiles, prepare, pargs, compute, *args, **kwargs):
+        def run():
+            sampler.enter(PHASES[compute.__name__])
+            yield from map_tiles(scene, tiles, prepare, pargs, compute, *args, **kwargs)
+
+        return run()
+
+    def stitched(tiled, *args, **kwargs):
+        def run():
+            yield from tiled
+            sampler.enter("stitch")
+
+        return stitch(run(), *args, **kwargs)
+
+    def scene(*args, **kwargs):
+        sampler.enter("kind")
+        result = segment_scene(*args, **kwargs)
+        sampler.enter("write")
+        return result
+
+    seg.tile_scene, seg._csf_tiled, seg._stitch, seg.map_tiles = (
+        spill, cloth, stitched, mapped
+    )  # fmt: skip
+    segmentation.segment_scene = scene
+
+
+def memory_worker(spec):
+    """One scan's job in this process, the phases watched; prints a JSON row."""
+    from skpcd.cli import main as cli
+
+    sampler, facts = PhaseSampler(), {}
+    _watch_phases(sampler, facts)
+    base = _status()
+    sampler.start()
+    with tempfile.TemporaryDirectory(dir=spec["temp"]) as out:
+        rc = cli(["segment", spec["scan"], "-o", out, "--tile-size", str(spec["tile"])])
+    sampler.stop()
+    phases = {p: sampler.peaks[p] for p in ORDER if p in sampler.peaks}
+    row = {
+        "scan": Path(spec["scan"]).name,
+        "rc": rc,
+        **facts,
+        "base_anon_mib": base["RssAnon"],
+        "peak_anon_mib": max(p["anon_mib"] for p in phases.values()),
+        "vmhwm_mib": _status()["VmHWM"],
+        "phases": phases,
+    }
+    print(json.dumps(row))
+
+
+def straight_street(scan, copies):
+    """``scan`` and ``copies - 1`` copies of it end to end along x, 300 m
+    apart, written beside it (LAS, chunk by chunk; kept when there)."""
+    import laspy
+
+    path = Path(scan).with_name(f"{Path(scan).stem}_x{copies}.las")
+    if path.exists():
+        return path
+    with laspy.open(scan) as reader:
+        header = reader.header
+        shift = round(300.0 / header.scales[0])
+        if header.maxs[0] - header.mins[0] >= 200.0:
+            sys.exit(f"{scan} spans 200 m or more along x: its tiles would differ")
+        out = laspy.LasHeader(point_format=header.point_format, version=header.version)
+        out.scales, out.offsets = header.scales, header.offsets
+    part = path.with_name(f".{path.name}.part")
+    with laspy.open(part, mode="w", header=out) as writer:
+        for copy in range(copies):
+            with laspy.open(scan) as reader:
+                for points in reader.chunk_iterator(2_000_000):
+                    points.X = points.X + copy * shift
+                    writer.write_points(points)
+    os.replace(part, path)
+    return path
+
+
+def memory_text(results):
+    """The text summary of the memory runs."""
+    lines = [
+        "skpcd segment --tile-size 100: memory by phase (benchmarks/bench_tiles.py "
+        "--memory)",
+        f"  {results['date']}, commit {results['commit']}, {results['machine']}",
+        "  RssAnon peak per phase, MiB (a fresh process each, imports "
+        f"{results['runs'][0]['base_anon_mib']:.0f} MiB); VmHWM: peak RSS, mapped "
+        "result files included",
+        "",
+        f"{'scan':22} {'points':>10} {'tiles':>5} {'largest':>9}  "
+        + " ".join(f"{p:>7}" for p in ORDER)
+        + f"  {'peak':>7} {'VmHWM':>7}",
+    ]
+    for r in results["runs"]:
+        lines.append(
+            f"{r['scan']:22} {r['n_points']:>10} {r['n_tiles']:>5} "
+            f"{r['largest_tile']:>9}  "
+            + " ".join(
+                f"{r['phases'][p]['anon_mib']:>7.0f}" if p in r["phases"] else " " * 7
+                for p in ORDER
+            )
+            + f"  {r['peak_anon_mib']:>7.0f} {r['vmhwm_mib']:>7.0f}"
+        )
+    lines += [
+        "",
+        "largest: points of the largest buffered tile; *_xK: the first scan's "
+        "street K times end to end (the same tiles, K times)",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def memory_main(args):
+    scans = [Path(s) for s in args.memory]
+    if args.streets:
+        scans += [straight_street(args.streets, k) for k in (3, 5)]
+    results = {**provenance(), "tile_size": args.tile_size, "runs": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        for scan in scans:
+            spec = {"scan": str(scan), "tile": args.tile_size, "temp": tmp}
+            run = subprocess.run(
+                [sys.executable, __file__, "--memory-worker", json.dumps(spec)],
+                capture_output=True, text=True, check=True,
+            )  # fmt: skip
+            row = json.loads(run.stdout.strip().splitlines()[-1])
+            results["runs"].append(row)
+            print(json.dumps(row), flush=True)
+    write_results(args.out, results, memory_text(results))
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--tile-size", type=float, default=30.0)
+    parser.add_argument("--tile-size", type=float, default=None)
     parser.add_argument("--eps", type=float, default=0.5)
     parser.add_argument("--out", type=Path, default=Path("/tmp/tiles.json"))
+    parser.add_argument(
+        "--memory", nargs="+", metavar="SCAN", help="the memory of tiled jobs"
+    )
+    parser.add_argument(
+        "--streets", metavar="SCAN", help="with --memory: copies of SCAN end to end"
+    )
+    parser.add_argument("--memory-worker", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.memory_worker:
+        memory_worker(json.loads(args.memory_worker))
+        return
+    if args.memory:
+        args.tile_size = args.tile_size or MEMORY_TILE
+        memory_main(args)
+        return
+    args.tile_size = args.tile_size or 30.0
     warnings.simplefilter("ignore")
     paths = sorted((DATA / "scans").glob("*.las"))
     if not paths:
