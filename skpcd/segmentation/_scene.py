@@ -38,6 +38,7 @@ from skpcd.segmentation.ground._classified import (
 )
 from skpcd.segmentation.tiling._segment import segment_tiled
 from skpcd.utils._compile import entry_point
+from skpcd.utils._progress import stage
 from skpcd.utils._validation import check_scene
 
 __all__ = ["SceneSegmentation", "segment_scene"]
@@ -721,14 +722,15 @@ def _segment_rest(
                 )
 
         ground_xyz = xyz[is_ground]
-        sub, kinds, _ = segment_structures(
-            pts,
-            ground_xyz,
-            used,
-            structures if isinstance(structures, dict) else None,
-            cluster,
-            n_jobs=n_jobs,
-        )
+        with stage("structures (facades, wires, trunks)"):  # on the terminal
+            sub, kinds, _ = segment_structures(
+                pts,
+                ground_xyz,
+                used,
+                structures if isinstance(structures, dict) else None,
+                cluster,
+                n_jobs=n_jobs,
+            )
         del ground_xyz, pts
         kept = _size_filter(sub, len(kinds), min_cluster_size, max_cluster_size)
         labels[rest] = kept[sub]

@@ -120,7 +120,8 @@ def stage(desc, *, enabled=None, stream=None):
         Python or numba code (a C extension that keeps the interpreter
         busy, such as the cloth simulation, freezes it until it returns);
         the line is erased when the step ends. Drawn from the main thread
-        only (not by tiles run in threads).
+        only (not by tiles run in threads), and not inside another stage or
+        a :func:`steps` loop (the clusterings of the structures step).
     """
     stream = sys.stderr if stream is None else stream
     if enabled is None and not _state["report"]:
@@ -129,6 +130,7 @@ def stage(desc, *, enabled=None, stream=None):
     if not main or _state["loops"] or not _enabled(enabled, stream):
         yield
         return
+    _state["loops"] += 1  # the steps inside it are not drawn
     from tqdm import tqdm
 
     bar = tqdm(
@@ -149,6 +151,7 @@ def stage(desc, *, enabled=None, stream=None):
     try:
         yield
     finally:
+        _state["loops"] -= 1
         stop.set()
         ticker.join()
         bar.close()

@@ -322,7 +322,10 @@ def test_segment_shows_its_stages_and_a_bar_on_a_terminal_only(tmp_path, scene_f
     status, out, shown = _on_a_terminal(_segment(scene, tmp_path / "a"), tmp_path)
     assert status == 0, shown
     assert "reading scene.ply: 00:0" in shown
-    assert "GroundFilter (" in shown and "AutoEpsDBSCAN: 00:" in shown
+    assert (
+        "GroundFilter (" in shown
+        and "structures (facades, wires, trunks): 00:" in shown
+    )
     assert "writing: 100%" in shown and "it/s]" in shown
     assert "written" in out
     quiet = _segment(scene, tmp_path / "b", "--quiet")
