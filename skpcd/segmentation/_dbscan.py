@@ -48,10 +48,11 @@ EPS_SCALE = 2.5
 _FAR_OUT = 100.0
 
 
-def stable_draw(n, size, rng):
+def stable_draw(n, size, rng, *, chunk=1 << 22):
     """Indices of ``size`` of ``n`` points drawn without replacement, in
     the order of their draw: the points of the ``size`` smallest of ``n``
-    uniform keys (``rng.random(n)``), ordered by key.
+    uniform keys (``rng.random``, drawn ``chunk`` at a time so that memory
+    stays O(size + chunk)), ordered by key.
 
     The keys of the first points do not depend on ``n``: appending points
     to a cloud (a few far outliers) changes a draw by at most the points
@@ -59,11 +60,16 @@ def stable_draw(n, size, rng):
     draws an unrelated sample. The one place of this draw, for
     :func:`sample_queries` and :func:`~skpcd.segmentation.describe_scan`.
     """
-    keys = rng.random(n)
-    if size >= n:
-        return np.argsort(keys, kind="stable")
-    first = np.argpartition(keys, size - 1)[:size]
-    return first[np.argsort(keys[first], kind="stable")]
+    size = min(int(size), n)
+    keys, rows = np.zeros(0), np.zeros(0, dtype=np.int64)
+    for start in range(0, n, chunk):
+        new = rng.random(min(chunk, n - start))
+        keys = np.concatenate([keys, new])
+        rows = np.concatenate([rows, np.arange(start, start + len(new))])
+        if len(keys) > size:
+            first = np.argpartition(keys, size - 1)[:size] if size else []
+            keys, rows = keys[first], rows[first]
+    return rows[np.argsort(keys, kind="stable")]
 
 
 def sample_queries(n, max_samples, random_state):

@@ -65,6 +65,9 @@ def test_the_draw_keeps_its_points_when_points_are_appended():
         # at most the 3 appended points come in, and as many others go out
         assert len(np.setdiff1d(before, after)) <= 3
         assert np.setdiff1d(after, before).min(initial=n) >= n
+        # drawn chunk by chunk (memory O(size + chunk)), the same draw
+        chunked = stable_draw(n + 3, size, np.random.default_rng(0), chunk=1000)
+        np.testing.assert_array_equal(chunked, after)
         rows = sample_queries(n + 3, size, 0)
         assert np.all(np.diff(rows) > 0)
         assert len(np.setdiff1d(sample_queries(n, size, 0), rows)) <= 3
