@@ -25,6 +25,7 @@ from skpcd.segmentation._dbscan import (
     fit_knee,
     kdist_mean,
     sample_queries,
+    stable_draw,
 )
 from skpcd.segmentation._structures import segment_structures
 from skpcd.segmentation.ground._bases import BASE_THRESHOLD
@@ -599,17 +600,8 @@ def chunked_sample_queries(n, max_samples, random_state, chunk_size):
     """
     if max_samples is None or n <= max_samples:
         return sample_queries(n, max_samples, random_state)
-    size = int(max_samples)
     rng = check_random_state(random_state)
-    keys, ranks = np.zeros(0), np.zeros(0, dtype=np.int64)
-    for start in range(0, n, chunk_size):
-        new = rng.random(min(chunk_size, n - start))
-        keys = np.concatenate([keys, new])
-        ranks = np.concatenate([ranks, np.arange(start, start + len(new))])
-        if len(keys) > size:
-            first = np.argpartition(keys, size - 1)[:size]
-            keys, ranks = keys[first], ranks[first]
-    return np.sort(ranks)
+    return np.sort(stable_draw(n, int(max_samples), rng, chunk=chunk_size))
 
 
 def _estimate_eps(
