@@ -19,8 +19,10 @@ ON_FIRST_USE = {
     "matplotlib",
     "open3d",
     "pynndescent",
+    "pyogrio",  # the gis extra: GeoPackage inventories
     "skops",
     "sklearn.tree",
+    "tqdm",  # progress bars: drawn only on a terminal, not at --help
 }
 
 ROOT = Path(skpcd.__file__).parent

@@ -18,6 +18,7 @@ import numpy as np
 
 from skpcd.exceptions import PointCloudFileError
 from skpcd.io._atomic import atomic_path
+from skpcd.io._las_reader import read_vlr_records
 
 __all__ = [
     "INVENTORY_FORMATS",
@@ -77,8 +78,6 @@ def read_las_crs(path):
         from the GeoTIFF keys (``LASF_Projection`` 34735: the projected,
         else the geographic CRS), else None.
     """
-    from skpcd.io._las_reader import read_vlr_records
-
     records = {
         (user.rstrip("\0"), record): data
         for user, record, data in read_vlr_records(path)

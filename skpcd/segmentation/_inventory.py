@@ -12,6 +12,7 @@ CSV.
 import math
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 # the classes measured as poles (lean, height of what they carry): the
 # pole-like classes of the street simulator and the shipped model
@@ -62,8 +63,6 @@ def _min_area_rectangle(xy):
     """``(width, length, heading, centre)`` of the smallest rectangle around
     ``xy``: width <= length, heading the direction of the long side in
     degrees clockwise from north (+y), in [0, 180), centre its centre."""
-    from scipy.spatial import ConvexHull, QhullError
-
     xy = np.unique(np.round(xy, 4), axis=0)
     if len(xy) < 3:
         hull = xy
@@ -275,8 +274,6 @@ class GroundHeight:
         -------
         z : ndarray of shape (n,)
         """
-        from scipy.spatial import cKDTree
-
         xy = np.asarray(xy, dtype=float).reshape(-1, 2)
         if self.n_cells_ == 0:
             return np.full(len(xy), np.nan)

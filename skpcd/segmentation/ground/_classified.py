@@ -9,6 +9,10 @@ from numbers import Integral
 import numpy as np
 
 from skpcd.exceptions import PointCloudFileError, SegmentationWarning
+from skpcd.io import read_point_cloud
+from skpcd.io._chunks import is_streamed
+from skpcd.io._las_reader import iter_points, read_las_extent
+from skpcd.segmentation.ground._filter import GroundFilter
 from skpcd.segmentation.ground._presets import FROM_FILE
 
 __all__ = [
@@ -115,8 +119,6 @@ class ClassifiedGround:
         PointCloudFileError
             If the file has no classification field.
         """
-        from skpcd.io import read_point_cloud
-
         points, extras = read_point_cloud(path, fields="all")
         return points, self.flags_of(path, extras)
 
@@ -169,9 +171,6 @@ class ClassifiedGround:
         PointCloudFileError
             If the file has no classification field.
         """
-        from skpcd.io._chunks import is_streamed
-        from skpcd.io._las_reader import iter_points, read_las_extent
-
         if not is_streamed(path):
             ground = self.read(path)[1]
             return (
@@ -239,8 +238,6 @@ def ground_flags(ground, n_points):
     """The ground flags a ``ground`` argument gives outright (a boolean
     array-like, one per point), checked against ``n_points`` unless None;
     None for a preset, a filter, a :class:`ClassifiedGround` or None."""
-    from skpcd.segmentation.ground._filter import GroundFilter
-
     if ground is None or isinstance(ground, (str, GroundFilter, ClassifiedGround)):
         return None
     flags = np.asarray(ground)
