@@ -1,0 +1,41 @@
+"""The commands the README shows parse as written: every command and option it
+names exists (the parser's own checks, no work done)."""
+
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+
+from skpcd.cli import build_parser
+
+README = Path(__file__).resolve().parents[2] / "README.md"
+
+
+def _readme_commands():
+    text = README.read_text()
+    blocks = re.findall(r"```bash\n(.*?)```", text, flags=re.S)
+    commands = []
+    for block in blocks[1:]:  # the first block installs and runs the tests
+        for line in block.splitlines():
+            line = line.split("#", 1)[0].strip()
+            if line.startswith("skpcd "):
+                commands.append(line)
+    return commands
+
+
+COMMANDS = _readme_commands()
+
+
+def test_the_readme_shows_commands():
+    assert len(COMMANDS) >= 15
+
+
+@pytest.mark.parametrize("line", COMMANDS)
+def test_a_readme_command_parses(line, capsys):
+    argv = shlex.split(line)[1:]
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as e:  # argparse's refusal
+        pytest.fail(f"{line!r}: {capsys.readouterr().err.strip()} (status {e.code})")
+    assert args.command == argv[0]
