@@ -271,7 +271,10 @@ def memory_worker(spec):
     base = _status()
     sampler.start()
     with tempfile.TemporaryDirectory(dir=spec["temp"]) as out:
-        rc = cli(["segment", spec["scan"], "-o", out, "--tile-size", str(spec["tile"])])
+        rc = cli(
+            ["segment", spec["scan"], "-o", out, "--tile-size", str(spec["tile"])]
+            + spec["options"]
+        )
     sampler.stop()
     phases = {p: sampler.peaks[p] for p in ORDER if p in sampler.peaks}
     row = {
@@ -315,8 +318,8 @@ def straight_street(scan, copies):
 def memory_text(results):
     """The text summary of the memory runs."""
     lines = [
-        "skpcd segment --tile-size 100: memory by phase (benchmarks/bench_tiles.py "
-        "--memory)",
+        f"skpcd segment --tile-size {results['tile_size']:g} {results['options']}: "
+        "memory by phase (benchmarks/bench_tiles.py --memory)",
         f"  {results['date']}, commit {results['commit']}, {results['machine']}",
         "  RssAnon peak per phase, MiB (a fresh process each, imports "
         f"{results['runs'][0]['base_anon_mib']:.0f} MiB); VmHWM: peak RSS, mapped "
@@ -348,10 +351,16 @@ def memory_main(args):
     scans = [Path(s) for s in args.memory]
     if args.streets:
         scans += [straight_street(args.streets, k) for k in (3, 5)]
-    results = {**provenance(), "tile_size": args.tile_size, "runs": []}
+    results = {
+        **provenance(),
+        "tile_size": args.tile_size,
+        "options": args.options,
+        "runs": [],
+    }
     with tempfile.TemporaryDirectory() as tmp:
         for scan in scans:
             spec = {"scan": str(scan), "tile": args.tile_size, "temp": tmp}
+            spec["options"] = args.options.split()
             run = subprocess.run(
                 [sys.executable, __file__, "--memory-worker", json.dumps(spec)],
                 capture_output=True, text=True, check=True,
@@ -372,6 +381,9 @@ def main(argv=None):
     )
     parser.add_argument(
         "--streets", metavar="SCAN", help="with --memory: copies of SCAN end to end"
+    )
+    parser.add_argument(
+        "--options", default="", help="with --memory: more options of skpcd segment"
     )
     parser.add_argument("--memory-worker", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)

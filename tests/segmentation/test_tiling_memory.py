@@ -100,3 +100,30 @@ def test_chunked_sample_queries_holds_a_chunk_not_the_points():
         tracemalloc.stop()
     assert np.array_equal(got, sample_queries(5_000_000, 100_000, 0))
     assert peak < 15e6, peak
+
+
+def test_tiles_give_the_freed_heap_back(monkeypatch, tmp_path):
+    # glibc keeps freed blocks in the heap: without malloc_trim what the
+    # caller freed (the kind's sample of the scan) and each tile's
+    # temporaries stay resident under the next tile's
+    import skpcd.segmentation.tiling._dispatch as dispatch
+    import skpcd.segmentation.tiling._segment as seg
+    from skpcd.segmentation import segment_scene
+
+    calls = []
+
+    def trim():
+        calls.append(len(calls))
+
+    monkeypatch.setattr(dispatch, "release_free_memory", trim)
+    monkeypatch.setattr(seg, "release_free_memory", trim)
+    rng = np.random.default_rng(0)
+    xyz = rng.uniform([0, 0, 0], [60, 20, 2], (4000, 3))
+    result = segment_scene(
+        xyz, ground="street", structures=False, eps=1.0, tile_size=20,
+        temp_folder=tmp_path,
+    )  # fmt: skip
+    assert len(result.labels) == len(xyz)
+    # before and after the spill, each of the 3 tiles in the cloth's pass,
+    # and each tile of each pass over the tiles (cloth, bases, clusters)
+    assert len(calls) >= 2 + 3 + 3 * 3

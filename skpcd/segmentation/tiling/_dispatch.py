@@ -136,7 +136,9 @@ def map_tiles(scene, tiles, prepare, pargs, compute, cargs, n_jobs, ground=None)
 
     As :func:`skpcd.utils._parallel.map_batches`, of which this is the
     streaming form for tiles: in this process with ``n_jobs`` threads per
-    call unless a joblib backend was chosen (``parallel_config``); then
+    call (the freed heap given back to the system after each tile, see
+    :func:`~skpcd.utils._memory.release_free_memory`) unless a joblib
+    backend was chosen (``parallel_config``); then
     through :class:`sklearn.utils.parallel.Parallel` (on a Dask cluster
     inside ``parallel_config(backend="dask")``), ``n_jobs`` tiles at once
     (None: the context's), each with the cores left to its task.
@@ -166,7 +168,11 @@ def map_tiles(scene, tiles, prepare, pargs, compute, cargs, n_jobs, ground=None)
     backend = chosen_backend()
     if backend is None:
         for t in tiles:
-            yield here(t, effective_threads(n_jobs))
+            out = here(t, effective_threads(n_jobs))
+            # the tile's temporaries, freed, back to the system: the C heap
+            # would keep them, and the next tile's land among them
+            release_free_memory()
+            yield out
         return
     n_tasks = max(1, int(effective_n_jobs(n_jobs)))
     inner = getattr(backend, "inner_max_num_threads", None)

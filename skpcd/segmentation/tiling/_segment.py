@@ -39,6 +39,7 @@ from skpcd.segmentation.tiling._spill import (
     result_array,
     tile_scene,
 )
+from skpcd.utils._memory import release_free_memory
 
 __all__ = ["segment_tiled"]
 
@@ -110,8 +111,10 @@ def _csf_tiled(scene, tiles, filt, is_ground, n_jobs):
     if cloth.needs_cells:
         for t in tiles:
             cloth.add_cells(_owned_points(scene, t)[0])
+            release_free_memory()
     for t in tiles:
         cloth.sample(*_owned_points(scene, t))
+        release_free_memory()
     cloth.simulate()
     lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
     for index, (flags, bounds) in map_tiles(
@@ -713,10 +716,15 @@ def segment_tiled(
             f"tile_buffer={buffer:g} is too small for eps={eps:g}: the stitching "
             f"of segments across tiles needs at least 2 * eps = {2 * eps:g}"
         )
+    # the C heap keeps what was freed (a sample of the scan read to tell its
+    # kind, the spill's chunks) unless told to give it back: the tiles'
+    # memory then comes on top of the scan's
+    release_free_memory()
     scene = tile_scene(
         source, tile_size, buffer=buffer, chunk_size=chunk_size,
         temp_folder=temp_folder,
     )  # fmt: skip
+    release_free_memory()
     out = Path(tempfile.mkdtemp(prefix="skpcd_labels_", dir=temp_folder))
     try:
         grid, n = scene.grid, scene.n_points
