@@ -317,9 +317,9 @@ def straight_street(scan, copies):
 
 def memory_text(results):
     """The text summary of the memory runs."""
+    job = f"skpcd segment --tile-size {results['tile_size']:g} {results['options']}"
     lines = [
-        f"skpcd segment --tile-size {results['tile_size']:g} {results['options']}: "
-        "memory by phase (benchmarks/bench_tiles.py --memory)",
+        job.strip() + ": memory by phase (benchmarks/bench_tiles.py --memory)",
         f"  {results['date']}, commit {results['commit']}, {results['machine']}",
         "  RssAnon peak per phase, MiB (a fresh process each, imports "
         f"{results['runs'][0]['base_anon_mib']:.0f} MiB); VmHWM: peak RSS, mapped "
