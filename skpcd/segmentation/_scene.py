@@ -577,7 +577,8 @@ def _scan_sample(points, random_state):
     parts, seen = [], 0
     for chunk in iter_points(points):
         first = (-seen) % step
-        parts.append(np.asarray(chunk)[first::step, :3])
+        # a copy: a view would keep the whole chunk alive until the stack
+        parts.append(np.asarray(chunk)[first::step, :3].copy())
         seen += len(chunk)
     return np.vstack(parts)
 
