@@ -561,6 +561,38 @@ def _tiles_memory(data):
     return header, rows, provenance(data)
 
 
+def _startup(data):
+    rows = []
+    for tree in ("before", "after"):
+        for case, r in data["trees"][tree]["rows"].items():
+            if case == "segment_cold":  # the first run: the first_call table's
+                continue
+            rows.append([
+                Text(case), Text(tree), num(r["cpu_s"], 2), num(r["wall_s"], 2),
+                num(r["cpu_ratio"], 2), num(r["wall_ratio"], 2),
+            ])  # fmt: skip
+    header = ["case", "tree", "CPU, s", "wall, s", "CPU / sklearn", "wall / sklearn"]
+    where = provenance(data)
+    trees = data["trees"]
+    where["commit"] = (
+        f"{trees['before']['commit']} (before), {trees['after']['commit']} (after)"
+    )
+    return header, rows, where
+
+
+def _review(data):
+    fcp = [r["fcp_ms"] for r in data["rounds"]]
+    rows = [[
+        num(data["n_segments"], 0), num(data["n_points"], 0), num(data["page_mb"], 1),
+        num(sorted(fcp)[len(fcp) // 2], 0), num(max(fcp), 0),
+    ]]  # fmt: skip
+    header = [
+        "segments", "points", "page, MB", "first paint median, ms",
+        "first paint worst, ms",
+    ]  # fmt: skip
+    return header, rows, provenance(data)
+
+
 def _sim_to_real(data):
     rows = [
         [
@@ -704,6 +736,21 @@ TABLES = {
         "the peak anonymous memory (RssAnon) in each phase, then the peak RSS with "
         "the memory-mapped result files; the ``_x3`` and ``_x5`` scans are the 10 M "
         "point street three and five times end to end (the same tiles).",
+    ),
+    "startup": Table(
+        "startup.json",
+        _startup,
+        "A command in a fresh process, interpreter start and imports included, "
+        'against python -c "import sklearn.ensemble" measured in the same '
+        "rounds: --version, segment --help, and segment and identify on the 30,000 "
+        "points of a real KITTI sweep nearest the sensor (median of the rounds).",
+    ),
+    "review": Table(
+        "review.json",
+        _review,
+        "The review page (skpcd review) of simulated street segments, predicted "
+        "by the shipped model, opened from file:// in a fresh headless Chromium "
+        "each load: first contentful paint.",
     ),
     "sim_to_real": Table(
         "sim_to_real.json",
