@@ -245,10 +245,8 @@ def write_inventory(path, inventory, *, crs=None, overwrite=False):
 
     Raises
     ------
-    ValueError
-        If the extension is not one of ``INVENTORY_FORMATS``.
-    PointCloudFileError
-        If a GeoPackage is asked for and pyogrio is not installed.
+    ValueError, PointCloudFileError
+        As :func:`check_inventory_path`, before anything is written.
     """
     path = Path(path)
     fmt = check_inventory_path(path)

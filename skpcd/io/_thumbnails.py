@@ -188,10 +188,8 @@ def view_data_uris(points, size=96):
 
     Parameters
     ----------
-    points : array-like of shape (n_points, 3)
-        The segment.
-    size : int, default=96
-        Width and height of each view in pixels.
+    points, size
+        As for :func:`render_views`.
 
     Returns
     -------
