@@ -127,3 +127,24 @@ def test_tiles_give_the_freed_heap_back(monkeypatch, tmp_path):
     # before and after the spill, each of the 3 tiles in the cloth's pass,
     # and each tile of each pass over the tiles (cloth, bases, clusters)
     assert len(calls) >= 2 + 3 + 3 * 3
+
+
+def test_the_scan_kind_sample_holds_one_chunk_at_a_time(tmp_path):
+    # 4 M points read in chunks of 1 M: the sample keeps copies of its rows,
+    # not views that would keep every chunk (24 MB of xyz each) alive
+    from skpcd.io import write_point_cloud
+    from skpcd.segmentation._scene import _scan_sample
+
+    rng = np.random.default_rng(0)
+    path = tmp_path / "scan.las"
+    write_point_cloud(path, rng.uniform(0, 100, (4_000_000, 3)))
+    tracemalloc.start()
+    try:
+        sample = _scan_sample(path, 0)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert len(sample) == 200_000
+    # one chunk as read with its xyz, and the sample: 90 MB; views of the
+    # chunks kept all four chunks' xyz alive: 134 MB
+    assert peak < 110e6, peak
