@@ -202,3 +202,33 @@ def test_3d_view_opens_turns_and_closes(loaded, page):
     _press(loaded, ["\ue00c"])  # Escape
     assert loaded.execute_script("return skpcdReview.view3d()") is None
     assert not loaded.find_element("id", "viewer").is_displayed()
+
+
+def test_two_thousand_segments_draw_only_the_pictures_near_the_screen(
+    browser, tmp_path
+):
+    # the user guide's promise for large folders: every card is there, the
+    # pictures of cards far from the screen are drawn only when scrolled to,
+    # and the page stays at a few kilobytes per segment
+    rng = np.random.default_rng(0)
+    clouds = [rng.normal(0, 1, (int(rng.integers(50, 400)), 3)) for _ in range(2000)]
+    names = [f"segment_{i:04d}.ply" for i in range(len(clouds))]
+    path = tmp_path / "review.html"
+    write_review_page(path, clouds, names)
+    assert path.stat().st_size < 2000 * 10_000
+    browser.get(path.as_uri())
+    count = "return document.querySelectorAll('.card').length"
+    drawn = "return [...document.querySelectorAll('.card img')]" + (
+        ".filter(i => i.getAttribute('src')).length"
+    )
+    deadline = time.time() + 10
+    while browser.execute_script(count) < 2000 and time.time() < deadline:
+        time.sleep(0.1)
+    assert browser.execute_script(count) == 2000
+    first = browser.execute_script(drawn)
+    assert 0 < first < 2 * 400, first
+    browser.execute_script("window.scrollTo(0, document.body.scrollHeight)")
+    deadline = time.time() + 10
+    while browser.execute_script(drawn) <= first and time.time() < deadline:
+        time.sleep(0.1)
+    assert first < browser.execute_script(drawn) < 2 * 2000
