@@ -21,7 +21,7 @@ import numpy as np
 from sklearn.base import ClusterMixin
 from sklearn.utils._param_validation import Interval
 
-from skpcd.neighbors._grid import ball_counts, radius_grid
+from skpcd.neighbors._grid import ball_counts, build_grid, radius_grid
 from skpcd.segmentation import _cluster_kernels as k
 from skpcd.utils._compile import entry_point
 from skpcd.utils._estimator import SceneEstimator
@@ -67,6 +67,86 @@ def _union(grid, core, r2, n_threads):
     for other in forests[1:]:
         k.merge_forest(forests[0], other)
     return forests[0]
+
+
+def _threaded_forest(kernel, grid, n, args, n_threads):
+    """The union-find forest over ``n`` nodes that ``kernel(lo, hi, *args,
+    forest)`` links over the grid's cells ``lo`` to ``hi``: each thread
+    links a share of the cells (by point count) in a forest of its own, and
+    the forests are merged. Roots are the lowest nodes of their components,
+    whatever the threads."""
+    n_cells = grid.n_cells
+    dtype = np.int32 if n < 2**31 - 1 else np.int64
+    n_threads = min(n_threads, max(1, len(grid.order) // _MIN_UNION_POINTS))
+    bounds = np.searchsorted(
+        grid.cell_start, np.linspace(0, len(grid.order), n_threads + 1)[1:-1]
+    )
+    bounds = [0, *bounds.tolist(), n_cells]
+    forests = [np.arange(n, dtype=dtype) for _ in range(n_threads)]
+    name = getattr(kernel, "__name__", "union")
+    if n_threads == 1:
+        with parallel_section(name):
+            kernel(0, n_cells, *args, forests[0])
+        return forests[0]
+    with parallel_section(name), ThreadPoolExecutor(n_threads) as pool:
+        jobs = [
+            pool.submit(kernel, bounds[i], bounds[i + 1], *args, forests[i])
+            for i in range(n_threads)
+        ]
+        for job in jobs:
+            job.result()
+    for other in forests[1:]:
+        k.merge_forest(forests[0], other)
+    return forests[0]
+
+
+# The fine grid is used when its cells hold this many points on average:
+# below, the 125 cells around each cell cost more than they save.
+_FINE_MIN_POINTS = 2.0
+
+
+def _fine_dbscan(xyz, eps, min_samples, n_threads):
+    """:func:`grid_dbscan` on cells at most ``eps / sqrt(3)`` wide, or None
+    when the points are too sparse for it (or the scene too wide for such
+    cells). The points of a cell are all within ``eps`` of each other: a
+    cell holding ``min_samples`` points is all core, the core points of a
+    cell form one cluster, and two cells are joined by the first close pair
+    of core points found. The result is the same as on the radius grid:
+    the same core points, clusters, and nearest core point of each other
+    point."""
+    if not eps > 0:
+        return None
+    n = len(xyz)
+    h = eps / np.sqrt(3.0) * (1 - 1e-6)
+    grid = build_grid(
+        xyz, np.array([0, n], dtype=np.int64), np.array([h]), None, n_threads
+    )
+    if (
+        grid.h[0] * np.sqrt(3.0) > eps * (1 - 1e-7)
+        or n < _FINE_MIN_POINTS * grid.n_cells
+    ):
+        return None
+    r2 = eps * eps
+    if min_samples <= 1:
+        core_sorted = np.ones(n, dtype=np.bool_)
+    else:
+        core_sorted = np.zeros(n, dtype=np.bool_)
+        args = (grid, r2, min_samples, core_sorted)
+        parallel_rows(k.fine_core, grid.n_cells, n_threads, *args, min_chunk=1024)
+    parent = _threaded_forest(
+        k.fine_union, grid, grid.n_cells, (grid, core_sorted, r2), n_threads
+    )
+    nearest = np.full(n, -1, dtype=np.int64)
+    if not core_sorted.all():
+        args = (grid, core_sorted, r2, nearest)
+        parallel_rows(k.fine_border, grid.n_cells, n_threads, *args, min_chunk=1024)
+    labels = np.empty(n, dtype=np.int64)
+    k.fine_component_labels(
+        parent, grid.cell_start, core_sorted, nearest, grid.order, labels
+    )
+    core = np.empty(n, dtype=np.bool_)
+    core[grid.order] = core_sorted
+    return labels, core
 
 
 @entry_point
@@ -115,6 +195,9 @@ def grid_dbscan(xyz, eps, min_samples, *, n_jobs=None):
         return np.zeros(0, np.int64), np.zeros(0, np.bool_)
     n_threads = effective_threads(n_jobs)
     r2 = float(eps) ** 2
+    fine = _fine_dbscan(xyz, float(eps), int(min_samples), n_threads)
+    if fine is not None:
+        return fine
     grid = radius_grid(xyz, np.array([0, n], dtype=np.int64), eps, None, n_threads)
     if min_samples <= 1:
         core_sorted = np.ones(n, dtype=np.bool_)
