@@ -28,7 +28,12 @@ from skpcd.segmentation._clusters import (
 )
 from skpcd.segmentation._dbscan import EPS_SCALE, AutoEpsDBSCAN, estimate_eps
 from skpcd.segmentation._scan_kind import SCAN_KINDS, describe_scan, sweep_coordinates
-from skpcd.segmentation._structures import KINDS, STRUCTURE_DEFAULTS, segment_structures
+from skpcd.segmentation._structures import (
+    KINDS,
+    STRUCTURE_DEFAULTS,
+    segment_bounds,
+    segment_structures,
+)
 from skpcd.segmentation.ground import GROUND_PRESETS, GroundFilter
 from skpcd.segmentation.ground._classified import (
     FROM_FILE,
@@ -620,12 +625,9 @@ def _largest_box(xyz, labels):
     seg = labels >= 0
     if not seg.any():
         return np.zeros(2), 0.0
-    lab = labels[seg]
-    n = int(lab.max()) + 1
-    lo = np.full((n, 2), np.inf)
-    hi = np.full((n, 2), -np.inf)
-    np.minimum.at(lo, lab, xyz[seg, :2])
-    np.maximum.at(hi, lab, xyz[seg, :2])
+    n = int(labels.max()) + 1
+    lo, hi, _ = segment_bounds(labels, xyz, n)
+    lo, hi = lo[:, :2], hi[:, :2]
     ext = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
     area = ext.prod(axis=1)
     i = int(np.argmax(area))

@@ -263,3 +263,51 @@ def component_covariance(labels, xy, n, mean, cov, count):
             cov[g, 0] /= count[g]
             cov[g, 1] /= count[g]
             cov[g, 2] /= count[g]
+
+
+@njit(cache=True, nogil=True)
+def nearest_square(lo, hi, xyz, table, rep, ox, oy, cell, max_ring, out):
+    """For points ``lo`` to ``hi``: the square whose representative point
+    (``rep[j]``, x and y) is nearest in the plane, into ``out`` (ties: the
+    lower ``j``), or -1 when it lies beyond ``max_ring`` rings of squares.
+
+    ``table`` (shape (nx, ny)) holds each square's ``j`` (-1: none); the
+    squares ``cell`` wide start at ``(ox, oy)``, and a square's
+    representative lies in it. Rings of squares around the point's own are
+    scanned until the nearest found is closer than any square outside them
+    can be: after ring ``r``, ``r`` squares' widths. Rows are independent:
+    safe in threads."""
+    nx, ny = table.shape
+    for i in range(lo, hi):
+        qx, qy = xyz[i, 0], xyz[i, 1]
+        fx, fy = (qx - ox) / cell, (qy - oy) / cell
+        out[i] = -1
+        if not (abs(fx) < 1e15 and abs(fy) < 1e15):
+            continue  # far away: left to the caller
+        ci, cj = math.floor(fx), math.floor(fy)
+        best, best_d2 = -1, np.inf
+        for r in range(max_ring + 1):
+            for a in range(ci - r, ci + r + 1):
+                if a < 0 or a >= nx:
+                    continue
+                edge = a == ci - r or a == ci + r
+                step = 1 if edge else 2 * r
+                b = cj - r
+                while b <= cj + r:
+                    if b >= 0 and b < ny:
+                        j = table[a, b]
+                        if j >= 0:
+                            ex = rep[j, 0] - qx
+                            ey = rep[j, 1] - qy
+                            d2 = ex * ex + ey * ey
+                            if d2 < best_d2 or (d2 == best_d2 and j < best):
+                                best, best_d2 = j, d2
+                    if step == 0:
+                        break
+                    b += step
+            # squares beyond ring r are at least r widths away (less a
+            # margin for the rounding of the point's square)
+            bound = (r - 1e-6) * cell
+            if best >= 0 and bound > 0 and best_d2 < bound * bound:
+                out[i] = best
+                break

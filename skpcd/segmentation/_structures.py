@@ -34,6 +34,7 @@ from skpcd.segmentation._structure_kernels import (
     column_counts,
     component_covariance,
     local_shape_rows,
+    nearest_square,
     neighbour_share,
     same_label_edges,
     segment_extents,
@@ -73,12 +74,23 @@ _WIRE_COLUMN_POINTS = 3  # most points 0.3-2 m above or below a wire point
 _FLAT_SHARE = 0.5  # planar share of a cluster touching a facade that joins it
 
 
+# The squares of height_above_ground are searched in a table when there are
+# at most this many in the ground's bounding box, and this many rings of
+# squares around a point before a k-d tree answers it.
+_MAX_SQUARES = 1 << 24
+_SQUARE_RINGS = 8
+
+
 def height_above_ground(xyz, ground_xyz, cell=1.0, n_threads=1):
     """Height of points above the ground points: ``z`` minus the mean height
     of the ground points in the nearest ``cell`` x ``cell`` square holding
-    ground; ``z`` minus the lowest ``z`` without ground. The squares are
-    those holding ground only (a k-d tree of their centres), so the cost
-    follows the points, not the scene's bounding box.
+    ground; ``z`` minus the lowest ``z`` without ground. "Nearest" is by
+    the plane distance to a representative ground point of each square
+    (its first), ties to the lower square; the squares holding ground are
+    searched in rings around each point in a table of the ground's
+    bounding box (a k-d tree of the representatives when that box holds
+    over ``_MAX_SQUARES`` squares, or for a point with no ground square
+    within ``_SQUARE_RINGS`` rings).
 
     Parameters
     ----------
@@ -86,8 +98,8 @@ def height_above_ground(xyz, ground_xyz, cell=1.0, n_threads=1):
     ground_xyz : ndarray of shape (n_ground, 3)
     cell : float, default=1.0
     n_threads : int, default=1
-        Threads of the k-d tree query (each point's answer is its own: the
-        same whatever the count).
+        Threads of the search (each point's answer is its own: the same
+        whatever the count).
 
     Returns
     -------
@@ -104,8 +116,23 @@ def height_above_ground(xyz, ground_xyz, cell=1.0, n_threads=1):
     uniq, first, inv = np.unique(key, return_index=True, return_inverse=True)
     zmean = np.bincount(inv, ground_xyz[:, 2]) / np.bincount(inv)
     centre = ground_xyz[first, :2]  # a ground point of each square
-    del key, ij, inv, uniq
-    _, j = cKDTree(centre).query(xyz[:, :2], workers=n_threads)
+    shape = (int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1)
+    del key, inv
+    j = np.full(len(xyz), -1, dtype=np.int64)
+    if shape[0] * shape[1] <= _MAX_SQUARES:
+        # the squares in a table, searched ring by ring around each point
+        table = np.full(shape, -1, dtype=np.int64)
+        table[ij[first, 0], ij[first, 1]] = np.arange(len(uniq))
+        origin = ground_xyz[:, :2].min(axis=0)
+        parallel_rows(
+            nearest_square, len(xyz), n_threads, xyz, table, centre,
+            float(origin[0]), float(origin[1]), float(cell), _SQUARE_RINGS, j,
+        )  # fmt: skip
+        del table
+    del ij, uniq
+    far = np.flatnonzero(j < 0)
+    if len(far):
+        j[far] = cKDTree(centre).query(xyz[far, :2], workers=n_threads)[1]
     return (xyz[:, 2] - zmean[j]).astype(np.float32)
 
 
@@ -151,7 +178,10 @@ def _components(xyz, mask, eps, n_jobs):
     return labels, int(sub.max()) + 1
 
 
-def _extents(labels, xyz, n):
+def segment_bounds(labels, xyz, n):
+    """Bounding box of each of the ``n`` segments of ``labels`` (-1: in
+    none) and its point count: ``lo, hi`` of shape (n, 3) (+inf / -inf for
+    a segment without points) and ``count`` of shape (n,)."""
 
     lo = np.full((n, 3), np.inf)
     hi = np.full((n, 3), -np.inf)
@@ -236,7 +266,7 @@ def find_structures(xyz, height, nb, eps, params, n_jobs=None):
     labels, n = _components(xyz, cand, eps, n_jobs)
     if n:
         _, minor = _xy_axes(labels, xyz, n)
-        lo, hi, _ = _extents(labels, xyz, n)
+        lo, hi, _ = segment_bounds(labels, xyz, n)
         length = np.hypot(hi[:, 0] - lo[:, 0], hi[:, 1] - lo[:, 1])
         good = (length >= params["wire_min_length"]) & (
             minor <= params["wire_max_width"]
@@ -248,7 +278,7 @@ def find_structures(xyz, height, nb, eps, params, n_jobs=None):
     labels, n = _regions(nb, cand, normal)
     del normal
     if n:
-        lo, hi, _ = _extents(labels, xyz, n)
+        lo, hi, _ = segment_bounds(labels, xyz, n)
         length = np.hypot(hi[:, 0] - lo[:, 0], hi[:, 1] - lo[:, 1])
         good = (hi[:, 2] - lo[:, 2] >= params["facade_min_height"]) & (
             length >= params["facade_min_length"]
@@ -291,7 +321,7 @@ def find_trunks(xyz, trunk, eps, min_height, n_jobs=None):
     labels, n = _components(xyz, trunk, min(eps, 0.5), n_jobs)
     if not n:
         return labels, 0
-    lo, hi, _ = _extents(labels, xyz, n)
+    lo, hi, _ = segment_bounds(labels, xyz, n)
     major, _ = _xy_axes(labels, xyz, n)
     good = (hi[:, 2] - lo[:, 2] >= min_height) & (major <= _TRUNK_MAX_WIDTH)
     new = np.full(n + 1, -1, dtype=np.int64)
