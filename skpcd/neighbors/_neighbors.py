@@ -46,6 +46,11 @@ _OCCUPANCY = 0.5
 _OFF_SHARE = 0.01
 # Shells of cells a k-nearest query may scan before a coarser grid takes over.
 _MAX_SHELL = 8
+# When at most this share of the queries needs more than _MAX_SHELL shells,
+# they scan up to _FAR_SHELL shells of the same grid before a coarser grid
+# is built.
+_FEW_FAR = 1e-3
+_FAR_SHELL = 32
 # Passes on ever coarser grids before the remaining queries go to cKDTree.
 _COARSER = 3
 # Remaining isolated queries are answered by brute force when they need at
@@ -374,6 +379,24 @@ def _search_packed(
             if not hard.any():
                 return nb, order
             todo, hard = hard, np.zeros(n, dtype=np.bool_)
+            if attempt == 0 and todo.sum() <= _FEW_FAR * n:
+                # a few isolated queries: farther shells of the same grid
+                # cost less than sorting the cloud again on a coarser one
+                rows = g.cells_with(todo, grid)
+                args = (
+                    rows,
+                    grid,
+                    indptr,
+                    _FAR_SHELL,
+                    todo,
+                    nb.indices,
+                    nb.sqdist,
+                    hard,
+                )
+                parallel_rows(g.knn_cells, len(rows), n_threads, *args)
+                if not hard.any():
+                    return nb, order
+                todo, hard = hard, np.zeros(n, dtype=np.bool_)
             which = np.flatnonzero(todo)
             cloud = np.searchsorted(offsets, which, side="right") - 1
             if sizes[cloud].sum() <= _BRUTE_WORK:

@@ -94,6 +94,32 @@ def test_grid_equals_kd_tree_on_random_and_clustered_clouds(
         assert all((d[1:-1] < d[2:]) | ((d[1:-1] == d[2:]) & (row[1:-1] < row[2:])))
 
 
+def test_a_few_isolated_queries_scan_farther_shells_of_the_same_grid(monkeypatch):
+    """Three points 0.2-0.4 m off a dense plane (cells ~1.6 cm: beyond the
+    first 8 shells, within 32): answered on the same grid, no coarser grid
+    built, the same neighbours as the k-d tree."""
+    from skpcd.neighbors import _neighbors
+
+    built = []
+    real = _neighbors.build_grid
+    monkeypatch.setattr(
+        _neighbors, "build_grid", lambda *a, **k: built.append(1) or real(*a, **k)
+    )
+    rng = np.random.default_rng(5)
+    plane = np.column_stack([rng.uniform(0, 1, (20000, 2)), np.zeros(20000)])
+    far = [[1.2, 0.5, 0.0], [0.5, -0.3, 0.0], [0.5, 0.5, 0.4]]
+    pts = np.vstack([plane, far])
+    grid = compute_neighborhoods(pts, n_neighbors=10, algorithm="grid", n_jobs=2)
+    assert not built
+    _assert_same(grid, compute_neighborhoods(pts, n_neighbors=10, algorithm="kd_tree"))
+    # with the far pass off (and no brute force), a coarser grid answers
+    monkeypatch.setattr(_neighbors, "_FEW_FAR", 0.0)
+    monkeypatch.setattr(_neighbors, "_BRUTE_WORK", 0)
+    again = compute_neighborhoods(pts, n_neighbors=10, algorithm="grid", n_jobs=2)
+    assert built
+    _assert_same(again, grid)
+
+
 def test_grid_ties_on_a_lattice_keep_lowest_indices():
     # a centimetre lattice: many neighbours at exactly the same distance
     g = np.stack(np.meshgrid(*[np.arange(6) * 0.01] * 3, indexing="ij"), -1)
