@@ -7,7 +7,12 @@ import typing
 import numpy as np
 from scipy.spatial import cKDTree
 
-from skpcd.preprocessing._spacing import tree_spacing
+from skpcd.preprocessing._spacing import (
+    _LOCAL_RATIO,
+    nearest_neighbours,
+    spacing_of,
+    spacing_queries,
+)
 from skpcd.segmentation._dbscan import stable_draw
 
 __all__ = ["SCAN_KINDS", "ScanKind", "describe_scan", "sweep_coordinates"]
@@ -185,10 +190,7 @@ def describe_scan(points, *, sensor=None, scan_angle=None, random_state=0):
     # a draw that points appended to the cloud (far outliers) leave as it was
     drawn = stable_draw(len(xyz), min(len(xyz), _SAMPLE), rng)
     sample = xyz[np.sort(drawn)]
-    tree = cKDTree(xyz)  # one tree for the spacing and the vertical surfaces
-    spacing = tree_spacing(tree, max_points=_SAMPLE, random_state=0)
-    vertical = _vertical_fraction(tree, sample[:_SHAPE_SAMPLE])
-    del tree
+    spacing, vertical = _spacing_vertical(xyz, sample[:_SHAPE_SAMPLE])
     concentration, centre = _concentration(sample, xyz[drawn[:_CENTRES], :2])
     measured = {
         "spacing": float(spacing),
@@ -222,13 +224,45 @@ def describe_scan(points, *, sensor=None, scan_angle=None, random_state=0):
     return ScanKind("profiler", "points spread along a path", **measured)
 
 
-def _vertical_fraction(tree, queries):
-    """Fraction of the planar neighbourhoods (12 nearest neighbours of the
-    queries among the points of the k-d tree ``tree``) whose normal is
-    within 17 degrees of the horizontal."""
-    xyz = tree.data
-    k = min(12, len(xyz))
-    _, idx = tree.query(queries, k=k)
+def _spacing_vertical(xyz, shape_queries, local_ratio=_LOCAL_RATIO):
+    """The spacing of the points (:func:`~skpcd.preprocessing.point_spacing`
+    on ``_SAMPLE`` of them, seed 0) and the fraction of vertical planar
+    neighbourhoods (:func:`_vertical_fraction`) around ``shape_queries``.
+
+    Both are those of one k-d tree of all the points. A cloud of more than
+    ``local_ratio`` points per query point has its neighbourhoods found by
+    :func:`~skpcd.preprocessing._spacing.nearest_neighbours` instead (a
+    tree of the points near the queries, 13 neighbours each): the same
+    distances; the same neighbourhoods, in the same order, unless a
+    query's 13 nearest points hold two at the same distance and not at the
+    same place (which of them a tree returns depends on its shape): then
+    the neighbourhoods are those of the tree of all the points, as
+    before."""
+    rows = spacing_queries(len(xyz), _SAMPLE, 0)
+    spacing_queries_ = xyz if rows is None else xyz[rows]
+    m = len(spacing_queries_)
+    queries = np.concatenate([spacing_queries_, shape_queries])
+    if len(xyz) <= local_ratio * len(queries):
+        tree = cKDTree(xyz)
+        dist, _ = tree.query(spacing_queries_, k=min(len(xyz), 8))
+        _, idx = tree.query(shape_queries, k=min(12, len(xyz)))
+        return spacing_of(dist), _vertical_fraction(xyz, idx)
+    dist, idx = nearest_neighbours(
+        xyz, queries, min(13, len(xyz)), local_ratio=local_ratio
+    )
+    spacing = spacing_of(dist[:m])
+    dist, idx = dist[m:], idx[m:]
+    near = xyz[idx]
+    tied = (dist[:, 1:] == dist[:, :-1]) & (near[:, 1:] != near[:, :-1]).any(axis=2)
+    if tied.any():
+        _, idx = cKDTree(xyz).query(shape_queries, k=min(12, len(xyz)))
+    return spacing, _vertical_fraction(xyz, idx[:, :12])
+
+
+def _vertical_fraction(xyz, idx):
+    """Fraction of the planar neighbourhoods (the rows ``idx`` of ``xyz``:
+    the 12 nearest neighbours of each query point, nearest first) whose
+    normal is within 17 degrees of the horizontal."""
     nb = xyz[idx] - xyz[idx].mean(axis=1, keepdims=True)
     values, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb))
     planar = (values[:, 1] - values[:, 0]) > 0.3 * np.maximum(values[:, 2], 1e-300)
