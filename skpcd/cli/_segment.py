@@ -414,11 +414,12 @@ def run_identify(args):
     n_points = len(result.labels)
     with ExitStack() as stack:
         work = stack.enter_context(scratch_folder(out.parent))
+        segments = _segments(args, points, {}, result, work, fields=False)
+        if inventory is not None:  # measured only for the inventory
+            segments = measuring(segments, geometries)
         pred, kind, seg_score, seg_sizes = identify_segments(
             model,
-            measuring(
-                _segments(args, points, {}, result, work, fields=False), geometries
-            ),
+            segments,
             kinds=result.kinds,
             predict=lambda m, clouds: predict_or_explain(m, clouds, args, "identify"),
         )

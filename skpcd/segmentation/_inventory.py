@@ -63,7 +63,11 @@ def _min_area_rectangle(xy):
     """``(width, length, heading, centre)`` of the smallest rectangle around
     ``xy``: width <= length, heading the direction of the long side in
     degrees clockwise from north (+y), in [0, 180), centre its centre."""
-    xy = np.unique(np.round(xy, 4), axis=0)
+    # the distinct points to 0.1 mm, sorted by (x, y): one complex number
+    # each (np.unique of rows sorts a structured view, 10x slower)
+    xy = np.round(xy, 4)
+    distinct = np.unique(xy[:, 0] + 1j * xy[:, 1])
+    xy = np.column_stack([distinct.real, distinct.imag])
     if len(xy) < 3:
         hull = xy
     else:

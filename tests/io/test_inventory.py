@@ -186,6 +186,27 @@ def test_identify_writes_an_inventory_in_the_scan_crs(street):
     assert (columns["height"] > 0).all()
 
 
+def test_identify_without_inventory_measures_nothing(street, monkeypatch):
+    """The geometry of the segments (a convex hull each) is computed only
+    for an inventory."""
+    from skpcd.segmentation import _inventory
+
+    measured = []
+    real = _inventory.segment_geometry
+    monkeypatch.setattr(
+        _inventory,
+        "segment_geometry",
+        lambda *a, **k: measured.append(1) or real(*a, **k),
+    )
+    folder, scan, _, _ = street
+    argv = ["identify", str(scan), "-o", str(folder / "plain.las"), "--quiet"]
+    assert main(argv) == 0
+    assert not measured
+    argv += ["--overwrite", "--inventory", str(folder / "measured.csv")]
+    assert main(argv) == 0
+    assert measured
+
+
 def test_csv_inventory_and_refusals(street, tmp_path, monkeypatch):
     table = object_inventory(
         [segment_geometry(_pole(carried_at=2.0)), segment_geometry(_pole(seed=5))],
