@@ -195,6 +195,30 @@ def same_label_edges(indptr, indices, labels, mask, keep, counts):
 
 
 @njit(cache=True, nogil=True)
+def column_keys(lo, hi, xyz, ox, oy, side, ny, keys):
+    """Key ``ix * ny + iy`` of the ``side`` x ``side`` column of points
+    ``lo`` to ``hi`` (``ix = floor((x - ox) / side)``, the same for y), into
+    ``keys``. Rows are independent: safe in threads."""
+    for i in range(lo, hi):
+        ix = np.int64(math.floor((xyz[i, 0] - ox) / side))
+        iy = np.int64(math.floor((xyz[i, 1] - oy) / side))
+        keys[i] = ix * ny + iy
+
+
+@njit(cache=True, nogil=True)
+def sort_columns(order, starts, zs):
+    """Sort each column ``starts[c]:starts[c + 1]`` of ``zs`` by height,
+    ``order`` alongside."""
+    for c in range(len(starts) - 1):
+        lo, hi = starts[c], starts[c + 1]
+        if hi - lo < 2:
+            continue
+        by = np.argsort(zs[lo:hi])
+        zs[lo:hi] = zs[lo:hi][by]
+        order[lo:hi] = order[lo:hi][by]
+
+
+@njit(cache=True, nogil=True)
 def column_counts(order, starts, zs, mask, dz_lo, dz_hi, out):
     """For every masked point: how many points of its column lie between
     ``dz_lo`` and ``dz_hi`` above or below it. The points ``order[starts[c]:

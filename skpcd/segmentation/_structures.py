@@ -27,17 +27,20 @@ from scipy.sparse import csr_array
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
+from skpcd.neighbors._grid import argsort_keys
 from skpcd.preprocessing import compute_neighborhoods
 from skpcd.segmentation._clusters import euclidean_clusters
 from skpcd.segmentation._structure_kernels import (
     aligned_components,
     column_counts,
+    column_keys,
     component_covariance,
     local_shape_rows,
     nearest_square,
     neighbour_share,
     same_label_edges,
     segment_extents,
+    sort_columns,
 )
 from skpcd.utils._parallel import effective_threads, parallel_rows
 
@@ -136,16 +139,25 @@ def height_above_ground(xyz, ground_xyz, cell=1.0, n_threads=1):
     return (xyz[:, 2] - zmean[j]).astype(np.float32)
 
 
-def _column_counts(xyz, mask):
+def _column_counts(xyz, mask, n_threads=1):
     """For the masked points: points within 0.3 to 2 m above or below them
     in their ``_COLUMN`` x ``_COLUMN`` column (others 0)."""
 
     out = np.zeros(len(xyz), dtype=np.int64)
     if not mask.any():
         return out
-    ij = np.floor((xyz[:, :2] - xyz[:, :2].min(axis=0)) / _COLUMN).astype(np.int64)
-    key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
-    del ij
+    lo, hi = xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)
+    if ((hi - lo) / _COLUMN < 2.0**30).all():
+        ny = int(np.floor((hi[1] - lo[1]) / _COLUMN)) + 1
+        key = np.empty(len(xyz), dtype=np.int64)
+        parallel_rows(
+            column_keys, len(xyz), n_threads, xyz, float(lo[0]), float(lo[1]),
+            _COLUMN, ny, key,
+        )  # fmt: skip
+    else:  # columns beyond an int64 key (a point 1e9 m away): numbered
+        ij = np.floor((xyz[:, :2] - lo) / _COLUMN)
+        key = np.unique(ij, axis=0, return_inverse=True)[1].ravel()
+        del ij
     # only the columns holding a masked point: a table over the keys when
     # they are few (a street: tens of thousands of columns), np.isin when
     # the scene's extent makes them many (a far outlier)
@@ -158,10 +170,11 @@ def _column_counts(xyz, mask):
     else:
         wanted = np.isin(key, np.unique(key[mask]))
     idx = np.flatnonzero(wanted)
-    order = idx[np.lexsort((xyz[idx, 2], key[idx]))]
-    sk = key[order]
+    by_key, sk = argsort_keys(key[idx], n_threads)
+    order = idx[by_key]
     starts = np.flatnonzero(np.r_[True, sk[1:] != sk[:-1], True])
     zs = np.ascontiguousarray(xyz[order, 2])
+    sort_columns(order, starts, zs)
     column_counts(order, starts, zs, mask, 0.3, 2.0, out)
     return out
 
@@ -262,7 +275,7 @@ def find_structures(xyz, height, nb, eps, params, n_jobs=None):
     )
     # a wire hangs free: the points of a facade scanned in horizontal rings
     # (a spinning sensor) are linear too, but rings lie above and below
-    cand &= _column_counts(xyz, cand) <= _WIRE_COLUMN_POINTS
+    cand &= _column_counts(xyz, cand, effective_threads(n_jobs)) <= _WIRE_COLUMN_POINTS
     labels, n = _components(xyz, cand, eps, n_jobs)
     if n:
         _, minor = _xy_axes(labels, xyz, n)
