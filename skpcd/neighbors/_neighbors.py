@@ -298,6 +298,7 @@ def search_packed(
     algorithm="auto",
     with_sqdist=True,
     return_order=False,
+    rows=None,
 ):
     """Neighbourhoods of several clouds packed in one array, never crossing clouds.
 
@@ -320,6 +321,9 @@ def search_packed(
         the index in ``xyz`` of the ``t``-th point in that order, a
         permutation within each cloud; None for the k-d tree and for no
         points.
+    rows : ndarray of int, default=None
+        Only these points get their neighbours (the rows of the others are
+        empty); all points when None. The k-nearest grid search only.
 
     Returns
     -------
@@ -329,16 +333,18 @@ def search_packed(
         Only with ``return_order``.
     """
     nb, order = _search_packed(
-        xyz, offsets, n_neighbors, radius, n_threads, algorithm, with_sqdist
+        xyz, offsets, n_neighbors, radius, n_threads, algorithm, with_sqdist, rows
     )
     return (nb, order) if return_order else nb
 
 
 def _search_packed(
-    xyz, offsets, n_neighbors, radius, n_threads, algorithm, with_sqdist
+    xyz, offsets, n_neighbors, radius, n_threads, algorithm, with_sqdist, rows=None
 ):
     """:func:`search_packed`, returning ``(neighborhoods, grid order or None)``."""
     _check_search(n_neighbors, radius, algorithm)
+    if rows is not None and (n_neighbors is None or algorithm == "kd_tree"):
+        raise ValueError("rows is for the k-nearest grid search only")
     offsets = np.asarray(offsets, dtype=np.int64)
     # squared distances overflow beyond ~7.7e153: refused, not searched
     lo_hi = cloud_bounds(xyz, offsets)
@@ -351,6 +357,10 @@ def _search_packed(
     indptr = np.zeros(len(xyz) + 1, dtype=np.int64)
     if n_neighbors is not None:
         counts = np.repeat(np.minimum(sizes, int(n_neighbors)), sizes)
+        if rows is not None:
+            asked = np.zeros(len(xyz), dtype=bool)
+            asked[rows] = True
+            counts[~asked] = 0
         np.cumsum(counts, out=indptr[1:])
     if len(xyz) == 0:
         empty = Neighborhoods(
@@ -372,7 +382,11 @@ def _search_packed(
         todo = np.zeros(0, dtype=np.bool_)
         grid = _knn_grid(xyz, offsets, int(n_neighbors), lo_hi, n_threads)
         order = grid.order
-        rows = np.arange(grid.n_cells)
+        if rows is None:
+            rows = np.arange(grid.n_cells)
+        else:  # the cells holding a query
+            rows = g.cells_with(asked, grid)
+            del asked
         for attempt in range(_COARSER):
             args = (rows, grid, indptr, _MAX_SHELL, todo, nb.indices, nb.sqdist, hard)
             parallel_rows(g.knn_cells, len(rows), n_threads, *args)

@@ -15,11 +15,11 @@ import typing
 from numbers import Integral, Real
 
 import numpy as np
-from scipy.spatial import cKDTree
 from sklearn.base import ClusterMixin
 from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval
 
+from skpcd.neighbors._neighbors import search_packed
 from skpcd.segmentation._clusters import grid_dbscan
 from skpcd.utils._compile import entry_point
 from skpcd.utils._estimator import SceneEstimator
@@ -109,9 +109,20 @@ def _kdist_curve(xyz, n_neighbors, max_samples, random_state, n_jobs):
     n = len(xyz)
     k_max = min(int(n_neighbors), n - 1)
     rows = sample_queries(n, max_samples, random_state)
-    queries = xyz if len(rows) == n else xyz[rows]
-    tree = cKDTree(xyz, balanced_tree=False, compact_nodes=False)
-    dist, _ = tree.query(queries, k=k_max + 1, workers=effective_threads(n_jobs))
+    # the k nearest of the sampled points on the grid (the same as a k-d
+    # tree's), their distances computed as cKDTree computes them: the same
+    # curve, bit for bit, as the tiled estimate's trees give
+    threads = effective_threads(n_jobs)
+    nb = search_packed(
+        xyz, np.array([0, n]), n_neighbors=k_max + 1, n_threads=threads,
+        algorithm="grid", with_sqdist=False, rows=rows,
+    )  # fmt: skip
+    near = nb.indices.reshape(len(rows), k_max + 1)
+    e = xyz[near] - xyz[rows][:, None, :]
+    dist = np.sqrt(
+        (e[..., 0] * e[..., 0] + e[..., 1] * e[..., 1]) + e[..., 2] * e[..., 2]
+    )
+    del e, near
     # column 0 is the point itself (or a duplicate of it: distance 0 either way)
     return np.arange(1, k_max + 1), kdist_mean(dist[:, 1:])
 

@@ -220,3 +220,30 @@ def test_default_radius_keeps_real_objects_whole(held_out_scene):
     assert whole >= 0.7
     assert ari1 < 0.95
     assert whole1 < 0.7
+
+
+def _tree_curve(xyz, k, rows):
+    """The k-distance curve from a k-d tree of all points (the obvious way)."""
+    from scipy.spatial import cKDTree
+
+    from skpcd.segmentation._dbscan import kdist_mean
+
+    d, _ = cKDTree(xyz).query(xyz[rows], k=k + 1)
+    return kdist_mean(d[:, 1:])
+
+
+@pytest.mark.parametrize("max_samples", [None, 500])
+def test_kdist_curve_equals_a_kd_tree_bit_for_bit(real_sweeps, max_samples):
+    """The grid's neighbours with their distances computed as cKDTree
+    computes them: the same curve (so the same eps as the tiled estimate's
+    trees), on a real sweep and on a lattice of duplicates and ties."""
+    from skpcd.io import read_point_cloud
+    from skpcd.segmentation._dbscan import _kdist_curve, sample_queries
+
+    rng = np.random.default_rng(0)
+    lattice = np.round(rng.normal(0, 1, (3000, 3)) * 4) / 4
+    for xyz in (np.ascontiguousarray(read_point_cloud(real_sweeps[0])), lattice):
+        rows = sample_queries(len(xyz), max_samples, 0)
+        k, curve = _kdist_curve(xyz, 30, max_samples, 0, 2)
+        np.testing.assert_array_equal(k, np.arange(1, 31))
+        np.testing.assert_array_equal(curve, _tree_curve(xyz, 30, rows))
