@@ -89,6 +89,8 @@ def check_regular_file(path):
 
 def _pick(fields, name, path):
     """One requested field, with format aliases resolved."""
+    if name in ("x", "y", "z"):  # a copy: the points may hold this column
+        return np.array(fields[name])
     if name in fields:
         return np.asarray(fields[name])
     for group in _ALIASES.get(name, ()):
@@ -172,11 +174,13 @@ def read_point_cloud(path, *, fields=None, nonfinite="drop"):
     check_regular_file(path)
     if path.stat().st_size == 0:
         raise PointCloudFileError(path, "the file is empty (0 bytes).")
-    data, _ = module.read(path)
+    data, info = module.read(path)
     for c in "xyz":
         if c not in data:
             raise PointCloudFileError(path, f"the file has no {c!r} field.")
-    points = np.column_stack([np.asarray(data[c], dtype=np.float64) for c in "xyz"])
+    points = info.get("xyz")  # a format that reads the coordinates as one array
+    if points is None:
+        points = np.column_stack([np.asarray(data[c], dtype=np.float64) for c in "xyz"])
     if fields is None:
         wanted = []
     elif fields == "all":
@@ -188,8 +192,10 @@ def read_point_cloud(path, *, fields=None, nonfinite="drop"):
     extras = {name: _pick(data, name, path) for name in wanted}
     if len(points) == 0:
         raise PointCloudFileError(path, "the file declares no points.")
-    finite = np.isfinite(points).all(axis=1)
-    n_bad = int(len(points) - finite.sum())
+    # the extremes are finite only when every coordinate is (NaN propagates)
+    all_finite = np.isfinite(points.min()) and np.isfinite(points.max())
+    finite = None if all_finite else np.isfinite(points).all(axis=1)
+    n_bad = 0 if all_finite else int(len(points) - finite.sum())
     if n_bad and nonfinite != "keep":
         if nonfinite == "raise":
             raise PointCloudFileError(

@@ -11,6 +11,7 @@ points laspy decodes are counted against the header.
 import contextlib
 import os
 import typing
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +35,7 @@ __all__ = [
     "read_las_extent",
     "read_las_header",
     "read_vlr_records",
+    "scaled_xyz",
 ]
 
 
@@ -254,44 +256,174 @@ def _iter_points(laspy, path, layout, chunk_size, fields):
                 f"no field {missing[0]!r}; the file has: "
                 + ", ".join(n for n in available if n not in ("X", "Y", "Z")),
             )
+        header = reader.header
         for chunk in checked_chunks(reader, path, chunk_size, layout.n_points):
-            xyz = np.empty((len(chunk), 3))
-            for j, c in enumerate("xyz"):
-                xyz[:, j] = chunk[c]
+            xyz = scaled_xyz(chunk.array, header.scales, header.offsets)
             if fields is None:
                 yield xyz
             else:
                 yield xyz, {f: np.array(chunk[f]) for f in fields}
 
 
-def _read_records(laspy, path, layout, reader):
-    """Every point record of ``reader`` in one array. The points are decoded
-    a million at a time into an array of the declared size, allocated up
-    front when the file can hold that much (always for LAS: the size was
-    checked; for LAZ up to 64 times the file size or 256 MiB); beyond that (a
-    LAZ file whose points compress better than any survey), the array grows
-    with the points decoded."""
+def _read_raw(path, layout, dtype):
+    """The point records of an uncompressed LAS file, read straight into one
+    array of ``dtype`` (the size was checked against the file: fewer bytes
+    than declared now is a truncated file)."""
+    n = layout.n_points
+    with decoding(path):
+        array = np.empty(n, dtype)
+    view = array.view(np.uint8)
+    n_bytes = 0
+    with open(path, "rb") as f:
+        f.seek(layout.offset)
+        while n_bytes < len(view):
+            got = f.readinto(view[n_bytes:])
+            if not got:
+                raise cannot_read(
+                    path,
+                    f"truncated: the header declares {n} points, "
+                    f"{n_bytes // layout.record_length} could be read",
+                )
+            n_bytes += got
+    return array
+
+
+def _read_records(path, layout, reader):
+    """Every point record of ``reader`` in one structured array. An
+    uncompressed file is read as bytes; a LAZ file is decoded a million
+    points at a time into an array of the declared size, allocated up front
+    when the file can hold that much (up to 64 times the file size or 256
+    MiB); beyond that (a LAZ file whose points compress better than any
+    survey), the array grows with the points decoded."""
     n = layout.n_points
     dtype = reader.header.point_format.dtype()
+    if not layout.compressed and dtype.itemsize == layout.record_length:
+        return _read_raw(path, layout, dtype)
     chunks = checked_chunks(reader, path, 1_000_000, n)
     budget = max(2**28, 64 * layout.size)
     if not layout.compressed or n * layout.record_length <= budget:
         with decoding(path):
             array = np.empty(n, dtype)
-        start = 0
-        for chunk in chunks:
-            array[start : start + len(chunk)] = chunk.array
-            start += len(chunk)
-    else:
-        array = np.concatenate([chunk.array for chunk in chunks])
-    header = reader.header
-    return laspy.ScaleAwarePointRecord(
-        array, header.point_format, header.scales, header.offsets
+        flat, start = array.view(np.uint8), 0
+        for chunk in chunks:  # as bytes: a copy field by field is 3x slower
+            records = np.ascontiguousarray(chunk.array).view(np.uint8)
+            flat[start : start + len(records)] = records
+            start += len(records)
+        return array
+    return np.concatenate([chunk.array for chunk in chunks])
+
+
+def scaled_xyz(records, scales, offsets):
+    """The x, y, z of point ``records`` as one ``(n, 3)`` float64 array.
+
+    Each coordinate is ``X * scale + offset`` in float64, as laspy computes
+    it (the same bits), a block of rows at a time so that the records are
+    read once and the output written in order.
+
+    Parameters
+    ----------
+    records : ndarray
+        Point records of a LAS point format (structured, with the int32
+        fields ``X``, ``Y``, ``Z``).
+    scales, offsets : sequence of 3 float
+        The scales and offsets of the header.
+
+    Returns
+    -------
+    xyz : ndarray of shape (n, 3), dtype float64
+        The scaled coordinates.
+    """
+    n = len(records)
+    xyz = np.empty((n, 3))
+    block = 1 << 14
+    scale = np.tile(np.asarray(scales, dtype=np.float64), block)
+    offset = np.tile(np.asarray(offsets, dtype=np.float64), block)
+    columns = [records[c] for c in "XYZ"]
+    for start in range(0, n, block):
+        rows = xyz[start : start + block]
+        for j, column in enumerate(columns):
+            rows[:, j] = column[start : start + block]
+        flat = rows.reshape(-1)
+        np.multiply(flat, scale[: len(flat)], out=flat)
+        np.add(flat, offset[: len(flat)], out=flat)
+    return xyz
+
+
+class _Fields(Mapping):
+    """The fields of the points read, each decoded from the point records
+    when first looked up, then kept: a caller that wants x, y, z only never
+    pays for the other dimensions.
+
+    Parameters
+    ----------
+    path : Path
+        The file (named by the errors of decoding).
+    points : laspy.ScaleAwarePointRecord
+        The point records.
+    xyz : ndarray of shape (n, 3)
+        The scaled coordinates; fields ``x``, ``y``, ``z`` are its columns.
+    names : dict of str to list of str
+        Every field in file order, each with the dimensions it is made of
+        (several for a run ``name_0 ... name_{c-1}`` grouped into one
+        ``(n, c)`` field).
+    """
+
+    def __init__(self, path, points, xyz, names):
+        self._path = path
+        self._points = points
+        self._names = names
+        self._values = {c: xyz[:, j] for j, c in enumerate("xyz")}
+
+    def _dimension(self, name):
+        values = np.asarray(self._points[name])
+        if np.may_share_memory(values, self._points.array):
+            values = values.copy()  # a field of the records: its own array
+        return values
+
+    def __getitem__(self, name):
+        if name not in self._values:
+            members = self._names[name]  # KeyError for an unknown name
+            with decoding(self._path):
+                if len(members) == 1:
+                    self._values[name] = self._dimension(name)
+                else:
+                    self._values[name] = np.column_stack(
+                        [self._dimension(m) for m in members]
+                    )
+        return self._values[name]
+
+    def __contains__(self, name):  # without decoding (Mapping's looks it up)
+        return name in self._names
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self):
+        return len(self._names)
+
+
+def _field_names(laspy, points):
+    """Every field of ``points`` in file order, with the dimensions each is
+    made of, and the runs of extra dimensions grouped (by
+    :func:`~skpcd.io._common.group_fields`, on the types that decoding no
+    point gives); returns ``(names, grouped)``."""
+    empty = laspy.ScaleAwarePointRecord(
+        points.array[:0], points.point_format, points.scales, points.offsets
     )
+    probes = {c: np.empty(0) for c in "xyz"}
+    for name in points.point_format.dimension_names:
+        if name not in ("X", "Y", "Z"):
+            probes[name] = np.asarray(empty[name])
+    fields, grouped = group_fields(probes)
+    return {name: grouped.get(name, [name]) for name in fields}, grouped
 
 
 def read(path):
     """Read a LAS or LAZ file into ``(fields, info)``; see :mod:`skpcd.io._las`.
+
+    The point records are read at once; x, y, z are scaled then, every other
+    field is decoded from the records when it is first looked up in
+    ``fields``.
 
     Parameters
     ----------
@@ -300,11 +432,13 @@ def read(path):
 
     Returns
     -------
-    fields : dict of str to ndarray
+    fields : mapping of str to ndarray
         ``x``, ``y``, ``z`` (float64, scaled) then every other dimension.
     info : dict
-        ``version``, ``point_format``, ``scales``, ``offsets`` and
-        ``compressed``.
+        ``version``, ``point_format``, ``scales``, ``offsets``,
+        ``compressed``, ``grouped`` (the extra dimensions merged into each
+        ``(n, c)`` field) and ``xyz``, the ``(n, 3)`` array whose columns
+        are the fields ``x``, ``y``, ``z``.
 
     Raises
     ------
@@ -319,13 +453,13 @@ def read(path):
     path = Path(os.fspath(path))
     layout = checked_layout(path)
     with decoding(path), _open(laspy, path, layout) as reader:
-        points = _read_records(laspy, path, layout, reader)
+        records = _read_records(path, layout, reader)
         header = reader.header
-        fields = {c: np.asarray(points[c], dtype=np.float64) for c in "xyz"}
-        for name in points.point_format.dimension_names:
-            if name not in ("X", "Y", "Z"):
-                fields[name] = np.array(points[name])
-    fields, grouped = group_fields(fields)
+        xyz = scaled_xyz(records, header.scales, header.offsets)
+        points = laspy.ScaleAwarePointRecord(
+            records, header.point_format, header.scales, header.offsets
+        )
+        names, grouped = _field_names(laspy, points)
     info = {
         "version": str(header.version),
         "point_format": header.point_format.id,
@@ -333,5 +467,6 @@ def read(path):
         "offsets": tuple(float(o) for o in header.offsets),
         "compressed": str(path).lower().endswith(".laz"),
         "grouped": grouped,
+        "xyz": xyz,
     }
-    return fields, info
+    return _Fields(path, points, xyz, names), info

@@ -56,6 +56,18 @@ def is_segment_run_file(name):
     )
 
 
+def _bounds(points):
+    """``points.min(axis=0), points.max(axis=0)`` of an ``(n, 3)`` array,
+    column by column (five times faster than across the rows); a zero among
+    them, whose sign the order of the comparisons decides when the column
+    holds both 0.0 and -0.0, is taken from the reduction across the rows."""
+    lo = np.array([points[:, j].min() for j in range(points.shape[1])])
+    hi = np.array([points[:, j].max() for j in range(points.shape[1])])
+    if not (lo.all() and hi.all()):
+        lo, hi = points.min(axis=0), points.max(axis=0)
+    return lo, hi
+
+
 def write_segment_folder(
     folder,
     segments,
@@ -116,7 +128,7 @@ def write_segment_folder(
                 write_las(tmp / name, {**xyz, **fields}, header=las_header)
             else:
                 write_point_cloud(tmp / name, seg, fields=fields or None)
-            lo, hi = seg.min(axis=0), seg.max(axis=0)
+            lo, hi = _bounds(seg)
             rows.append([name, i, kinds[i], len(seg), *lo, *hi, *(hi - lo)])
         with open(tmp / SEGMENTS_SUMMARY, "w", newline="") as f:
             writer = csv.writer(f)
