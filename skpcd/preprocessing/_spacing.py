@@ -3,9 +3,6 @@
 import numpy as np
 from scipy.spatial import cKDTree
 
-from skpcd.preprocessing._spacing_kernels import block_table, in_table
-from skpcd.utils._geometry import point_bounds
-
 __all__ = [
     "nearest_neighbours",
     "point_spacing",
@@ -143,6 +140,11 @@ def nearest_neighbours(xyz, queries, k, *, workers=1, local_ratio=_LOCAL_RATIO):
     n, m = len(xyz), len(queries)
     if n <= local_ratio * max(m, 1) or m < 2:
         return _as_2d(*cKDTree(xyz).query(queries, k=k, workers=workers))
+    # imported only here: the spacing of a small cloud (skpcd info loads
+    # this module alone) needs neither numba nor the skpcd packages
+    from skpcd.preprocessing._spacing_kernels import block_table, in_table
+    from skpcd.utils._geometry import point_bounds
+
     corner, top = point_bounds(xyz)
     extent = float((top - corner).max())
     reach_of_coordinates = float(np.abs(np.concatenate([corner, top])).max()) + extent
