@@ -134,6 +134,25 @@ def interrupt_line(command, signum):
     return f"skpcd {command}: interrupted; no partial output left", 130
 
 
+def _small_pages():
+    """numpy's large arrays on 4 kB pages for the rest of the command,
+    unless ``NUMPY_MADVISE_HUGEPAGE`` says otherwise. A command allocates
+    and frees arrays of millions of points again and again; on transparent
+    huge pages the kernel zeroes each new array 2 MB at a time (on the 10 M
+    point street: 2.7 s of system time of ``skpcd segment``, 1 s of its 18
+    s, against 0.7 s more user time on small pages)."""
+    if "NUMPY_MADVISE_HUGEPAGE" in os.environ:
+        return
+    try:
+        from numpy._core.multiarray import _set_madvise_hugepage
+    except ImportError:  # numpy 1.x
+        try:
+            from numpy.core.multiarray import _set_madvise_hugepage
+        except ImportError:
+            return
+    _set_madvise_hugepage(False)
+
+
 def run(command, func, args):
     """Run ``func(args)`` as the command ``command``.
 
@@ -168,6 +187,7 @@ def run(command, func, args):
         from skpcd.utils._compile import compile_notice
         from skpcd.utils._progress import reporting, silenced
 
+        _small_pages()
         quiet = bool(getattr(args, "quiet", False))
         # a command writing its result to -o prints only a summary: not with
         # --quiet (evaluate's report, its result, stays)

@@ -191,3 +191,35 @@ def test_a_first_run_compiles_only_the_stages_it_runs(tmp_path):
     ran_not = {"structures", "PFH/FPFH", "improved PFH", "normals", "street simulator"}
     assert not stages & ran_not
     assert not any(s.startswith("ground") for s in stages)
+
+
+def _hugepage_flag(code):
+    """numpy's huge-page flag after running ``code`` in a fresh process,
+    with ``NUMPY_MADVISE_HUGEPAGE`` removed from or set in its environment."""
+    probe = (
+        "from numpy._core.multiarray import _set_madvise_hugepage as flag\n"
+        f"{code}\n"
+        "print(flag(False))\n"
+    )
+    return probe
+
+
+@pytest.mark.parametrize(
+    "env, want", [(None, "False"), ("1", "True")], ids=["default", "user's choice"]
+)
+def test_commands_run_on_small_pages_unless_the_user_says(tmp_path, env, want):
+    """A command turns off numpy's transparent huge pages (each new large
+    array zeroed 2 MB at a time), unless NUMPY_MADVISE_HUGEPAGE is set."""
+    pytest.importorskip("numpy._core.multiarray")
+    environ = {k: v for k, v in os.environ.items() if k != "NUMPY_MADVISE_HUGEPAGE"}
+    if env is not None:
+        environ["NUMPY_MADVISE_HUGEPAGE"] = env
+    code = _hugepage_flag(
+        "from skpcd.cli import main\n"
+        f"main(['simulate', '-o', {str(tmp_path / 'sim')!r}, '--quiet'])"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=environ,
+        timeout=300, check=True,
+    )  # fmt: skip
+    assert done.stdout.strip().splitlines()[-1] == want
