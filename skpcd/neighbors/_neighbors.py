@@ -299,6 +299,7 @@ def search_packed(
     with_sqdist=True,
     return_order=False,
     rows=None,
+    grid=None,
 ):
     """Neighbourhoods of several clouds packed in one array, never crossing clouds.
 
@@ -324,6 +325,10 @@ def search_packed(
     rows : ndarray of int, default=None
         Only these points get their neighbours (the rows of the others are
         empty); all points when None. The k-nearest grid search only.
+    grid : VoxelGrid, default=None
+        A grid of ``xyz`` (one cloud; any cell size: the search is exact on
+        any grid) for the k-nearest grid search, instead of one sized for
+        ``n_neighbors`` (:func:`suits_knn` says whether it is as fast).
 
     Returns
     -------
@@ -333,14 +338,16 @@ def search_packed(
         Only with ``return_order``.
     """
     nb, order = _search_packed(
-        xyz, offsets, n_neighbors, radius, n_threads, algorithm, with_sqdist, rows
-    )
+        xyz, offsets, n_neighbors, radius, n_threads, algorithm, with_sqdist, rows,
+        grid,
+    )  # fmt: skip
     return (nb, order) if return_order else nb
 
 
 def _search_packed(
-    xyz, offsets, n_neighbors, radius, n_threads, algorithm, with_sqdist, rows=None
-):
+    xyz, offsets, n_neighbors, radius, n_threads, algorithm, with_sqdist, rows=None,
+    grid=None,
+):  # fmt: skip
     """:func:`search_packed`, returning ``(neighborhoods, grid order or None)``."""
     _check_search(n_neighbors, radius, algorithm)
     if rows is not None and (n_neighbors is None or algorithm == "kd_tree"):
@@ -380,7 +387,8 @@ def _search_packed(
         )
         hard = np.zeros(n, dtype=np.bool_)
         todo = np.zeros(0, dtype=np.bool_)
-        grid = _knn_grid(xyz, offsets, int(n_neighbors), lo_hi, n_threads)
+        if grid is None:
+            grid = _knn_grid(xyz, offsets, int(n_neighbors), lo_hi, n_threads)
         order = grid.order
         if rows is None:
             rows = np.arange(grid.n_cells)
@@ -434,6 +442,15 @@ def _search_packed(
     )
     ball_lists(grid, radius, indptr, counts, nb.indices, nb.sqdist, n_threads)
     return nb, grid.order
+
+
+def suits_knn(grid, k):
+    """Whether a grid of one cloud holds about as many points a cell as
+    the k-nearest search sizes its own for (within a factor 2): a search
+    on it is as fast."""
+    target = max(1.0, _OCCUPANCY * k)
+    occupancy = len(grid.order) / max(grid.n_cells, 1)
+    return target / 2 <= occupancy <= 2 * target
 
 
 def _knn_grid(xyz, offsets, k, lo_hi=None, n_threads=1):

@@ -30,7 +30,10 @@ from skpcd.utils._parallel import effective_threads, parallel_rows, parallel_sec
 __all__ = [
     "EUCLIDEAN_EPS",
     "EuclideanClusters",
+    "FineGrid",
     "euclidean_clusters",
+    "fine_clusters",
+    "fine_grid",
     "grid_dbscan",
 ]
 
@@ -105,15 +108,25 @@ def _threaded_forest(kernel, grid, n, args, n_threads):
 _FINE_MIN_POINTS = 2.0
 
 
-def _fine_dbscan(xyz, eps, min_samples, n_threads):
-    """:func:`grid_dbscan` on cells at most ``eps / sqrt(3)`` wide, or None
-    when the points are too sparse for it (or the scene too wide for such
-    cells). The points of a cell are all within ``eps`` of each other: a
-    cell holding ``min_samples`` points is all core, the core points of a
-    cell form one cluster, and two cells are joined by the first close pair
-    of core points found. The result is the same as on the radius grid:
-    the same core points, clusters, and nearest core point of each other
-    point."""
+class FineGrid(typing.NamedTuple):
+    """A cloud on cells at most ``eps / sqrt(3)`` wide (:func:`fine_grid`):
+    the points of a cell are all within ``eps`` of each other, and the
+    points within ``eps`` of a cell lie in the 5 x 5 x 5 cells around it."""
+
+    grid: typing.Any  # VoxelGrid
+    eps: float
+
+    @property
+    def dense(self):
+        """Whether its cells hold :data:`_FINE_MIN_POINTS` points on
+        average, so that clustering on it beats the radius grid."""
+        return len(self.grid.order) >= _FINE_MIN_POINTS * self.grid.n_cells
+
+
+def fine_grid(xyz, eps, n_threads):
+    """The :class:`FineGrid` of ``xyz`` (C-contiguous float64) for ``eps``,
+    or None when ``eps`` is not positive or the scene is too wide for such
+    cells (a far outlier: over 2**20 cells to a side)."""
     if not eps > 0:
         return None
     n = len(xyz)
@@ -121,13 +134,28 @@ def _fine_dbscan(xyz, eps, min_samples, n_threads):
     grid = build_grid(
         xyz, np.array([0, n], dtype=np.int64), np.array([h]), None, n_threads
     )
-    if (
-        grid.h[0] * np.sqrt(3.0) > eps * (1 - 1e-7)
-        or n < _FINE_MIN_POINTS * grid.n_cells
-    ):
+    if grid.h[0] * np.sqrt(3.0) > eps * (1 - 1e-7):
         return None
-    r2 = eps * eps
-    if min_samples <= 1:
+    return FineGrid(grid, float(eps))
+
+
+def fine_clusters(fine, min_samples, n_threads, member=None):
+    """:func:`grid_dbscan` of the points of a :class:`FineGrid`, or of the
+    points ``member`` flags (bool, by point index; with ``min_samples`` 1
+    only): labels and core flags by point index, the others -1 and not
+    core, clusters numbered by their lowest point index.
+
+    A cell holding ``min_samples`` points is all core, the core points of a
+    cell form one cluster, and two cells are joined by the first close pair
+    of core points found. The result is that of the radius grid: the same
+    core points, clusters, and nearest core point of each other point."""
+    grid, r2 = fine.grid, fine.eps * fine.eps
+    n = len(grid.order)
+    if member is not None:
+        if min_samples > 1:
+            raise ValueError("member is for min_samples 1 (components) only")
+        core_sorted = np.ascontiguousarray(member[grid.order])
+    elif min_samples <= 1:
         core_sorted = np.ones(n, dtype=np.bool_)
     else:
         core_sorted = np.zeros(n, dtype=np.bool_)
@@ -137,7 +165,7 @@ def _fine_dbscan(xyz, eps, min_samples, n_threads):
         k.fine_union, grid, grid.n_cells, (grid, core_sorted, r2), n_threads
     )
     nearest = np.full(n, -1, dtype=np.int64)
-    if not core_sorted.all():
+    if member is None and not core_sorted.all():
         args = (grid, core_sorted, r2, nearest)
         parallel_rows(k.fine_border, grid.n_cells, n_threads, *args, min_chunk=1024)
     labels = np.empty(n, dtype=np.int64)
@@ -195,9 +223,9 @@ def grid_dbscan(xyz, eps, min_samples, *, n_jobs=None):
         return np.zeros(0, np.int64), np.zeros(0, np.bool_)
     n_threads = effective_threads(n_jobs)
     r2 = float(eps) ** 2
-    fine = _fine_dbscan(xyz, float(eps), int(min_samples), n_threads)
-    if fine is not None:
-        return fine
+    fine = fine_grid(xyz, float(eps), n_threads)
+    if fine is not None and fine.dense:
+        return fine_clusters(fine, int(min_samples), n_threads)
     grid = radius_grid(xyz, np.array([0, n], dtype=np.int64), eps, None, n_threads)
     if min_samples <= 1:
         core_sorted = np.ones(n, dtype=np.bool_)

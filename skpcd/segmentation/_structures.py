@@ -28,8 +28,8 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from skpcd.neighbors._grid import argsort_keys
-from skpcd.preprocessing import compute_neighborhoods
-from skpcd.segmentation._clusters import euclidean_clusters
+from skpcd.neighbors._neighbors import search_packed, suits_knn
+from skpcd.segmentation._clusters import euclidean_clusters, fine_clusters, fine_grid
 from skpcd.segmentation._structure_kernels import (
     aligned_components,
     column_counts,
@@ -179,13 +179,21 @@ def _column_counts(xyz, mask, n_threads=1):
     return out
 
 
-def _components(xyz, mask, eps, n_jobs):
+def _components(xyz, mask, eps, n_jobs, fine=None):
     """Connected components (``eps`` apart) of the masked points: labels
-    over all points (-1 outside the mask) and their count."""
+    over all points (-1 outside the mask) and their count. ``fine``: the
+    :class:`~skpcd.segmentation._clusters.FineGrid` of all the points for
+    ``eps``, searched with the mask instead of a grid of the masked points
+    when they are at least a quarter of all (the same components; for
+    fewer, its passes over all points cost more than a grid of theirs)."""
+    n_masked = int(mask.sum())
+    if not n_masked:
+        return np.full(len(xyz), -1, dtype=np.int64), 0
+    if fine is not None and fine.eps == eps and 4 * n_masked >= len(xyz):
+        labels, _ = fine_clusters(fine, 1, effective_threads(n_jobs), member=mask)
+        return labels, int(labels.max()) + 1
     labels = np.full(len(xyz), -1, dtype=np.int64)
     idx = np.flatnonzero(mask)
-    if len(idx) == 0:
-        return labels, 0
     sub = euclidean_clusters(xyz[idx], eps=eps, min_cluster_size=1, n_jobs=n_jobs)
     labels[idx] = sub
     return labels, int(sub.max()) + 1
@@ -260,8 +268,9 @@ def _regions(nb, mask, normal):
     return labels, int(n)
 
 
-def find_structures(xyz, height, nb, eps, params, n_jobs=None):
-    """Kind of every point: 0 object, 1 facade, 2 wire (int8)."""
+def find_structures(xyz, height, nb, eps, params, n_jobs=None, fine=None):
+    """Kind of every point: 0 object, 1 facade, 2 wire (int8). ``fine``:
+    the fine grid of the points for ``eps`` (see :func:`_components`)."""
 
     lin, plan, normal, axis_z, spread = local_shapes(xyz, nb, effective_threads(n_jobs))
     normal_z = np.abs(normal[:, 2])
@@ -276,7 +285,7 @@ def find_structures(xyz, height, nb, eps, params, n_jobs=None):
     # a wire hangs free: the points of a facade scanned in horizontal rings
     # (a spinning sensor) are linear too, but rings lie above and below
     cand &= _column_counts(xyz, cand, effective_threads(n_jobs)) <= _WIRE_COLUMN_POINTS
-    labels, n = _components(xyz, cand, eps, n_jobs)
+    labels, n = _components(xyz, cand, eps, n_jobs, fine)
     if n:
         _, minor = _xy_axes(labels, xyz, n)
         lo, hi, _ = segment_bounds(labels, xyz, n)
@@ -299,7 +308,7 @@ def find_structures(xyz, height, nb, eps, params, n_jobs=None):
         facade = _keep(labels, good)
         # the planar vertical patches linked to a facade (window recesses,
         # doors, shop fronts set back from the wall) are facade too
-        comp, m = _components(xyz, cand | facade, eps, n_jobs)
+        comp, m = _components(xyz, cand | facade, eps, n_jobs, fine)
         linked = np.zeros(m + 1, dtype=bool)
         linked[comp[facade]] = True
         facade = (comp >= 0) & linked[comp]
@@ -328,10 +337,10 @@ def filter_labels(labels):
     return out
 
 
-def find_trunks(xyz, trunk, eps, min_height, n_jobs=None):
+def find_trunks(xyz, trunk, eps, min_height, n_jobs=None, fine=None):
     """Vertical trunks: pieces of trunk points at least ``min_height`` tall
     and thin; the trunk of every point (-1: none) and their count."""
-    labels, n = _components(xyz, trunk, min(eps, 0.5), n_jobs)
+    labels, n = _components(xyz, trunk, min(eps, 0.5), n_jobs, fine)
     if not n:
         return labels, 0
     lo, hi, _ = segment_bounds(labels, xyz, n)
@@ -437,9 +446,21 @@ def segment_structures(xyz, ground_xyz, eps, params, cluster, n_jobs=None):
     labels = np.full(len(xyz), -1, dtype=np.int64)
     if len(xyz) < 3:
         return labels, np.zeros(0, dtype=np.int8), {}
-    nb = compute_neighborhoods(xyz, n_neighbors=params["n_neighbors"], n_jobs=n_jobs)
+    # one grid for the components of every kind of point and, when its
+    # cells suit it, for the k-nearest search (exact on any grid)
+    threads = effective_threads(n_jobs)
+    fine = fine_grid(xyz, eps, threads)
+    fine = fine if fine is not None and fine.dense else None
+    k = params["n_neighbors"]
+    knn_grid = fine.grid if fine is not None and suits_knn(fine.grid, k) else None
+    nb = search_packed(
+        xyz, np.array([0, len(xyz)]), n_neighbors=k, n_threads=threads, grid=knn_grid
+    )
+    del knn_grid
     height = height_above_ground(xyz, ground_xyz, n_threads=effective_threads(n_jobs))
-    kind, trunk_points, planar = find_structures(xyz, height, nb, eps, params, n_jobs)
+    kind, trunk_points, planar = find_structures(
+        xyz, height, nb, eps, params, n_jobs, fine
+    )
     del height
     objects = kind == 0
     sub = cluster(objects)
@@ -454,7 +475,7 @@ def segment_structures(xyz, ground_xyz, eps, params, cluster, n_jobs=None):
         ) / np.maximum(np.bincount(sub[inside], minlength=n_sub), 1)
         flat = np.zeros(len(xyz), dtype=bool)
         flat[np.flatnonzero(objects)[inside]] = share[sub[inside]] >= _FLAT_SHARE
-        comp, m = _components(xyz, flat | (kind == 1), eps, n_jobs)
+        comp, m = _components(xyz, flat | (kind == 1), eps, n_jobs, fine)
         touching = np.zeros(m + 1, dtype=bool)
         touching[comp[kind == 1]] = True
         absorbed = flat & touching[comp]
@@ -472,7 +493,7 @@ def segment_structures(xyz, ground_xyz, eps, params, cluster, n_jobs=None):
         del comp, flat, rank
     del planar
     trunks, n_trunks = find_trunks(
-        xyz, trunk_points & objects, eps, params["trunk_min_height"], n_jobs
+        xyz, trunk_points & objects, eps, params["trunk_min_height"], n_jobs, fine
     )
     obj_labels = np.full(len(xyz), -1, dtype=np.int64)
     obj_labels[objects] = sub
@@ -488,7 +509,7 @@ def segment_structures(xyz, ground_xyz, eps, params, cluster, n_jobs=None):
         if k == 1 and facade_parts is not None:
             part, n = facade_parts
         else:
-            part, n = _components(xyz, kind == k, eps, n_jobs)
+            part, n = _components(xyz, kind == k, eps, n_jobs, fine)
         inside = part >= 0
         labels[inside] = part[inside].astype(np.int64) + offset
         kinds.append(np.full(n, k, dtype=np.int8))

@@ -338,10 +338,36 @@ def test_fine_and_radius_grids_agree_on_a_real_sweep(
 
 def test_the_fine_grid_is_taken_only_where_cells_hold_points():
     dense = _dense(3000, seed=1)
-    assert _clusters._fine_dbscan(dense, 0.3, 5, 1) is not None
+    assert _clusters.fine_grid(dense, 0.3, 1).dense
     sparse = np.random.default_rng(0).uniform(0, 100, (3000, 3))
-    assert _clusters._fine_dbscan(sparse, 0.3, 5, 1) is None
+    assert not _clusters.fine_grid(sparse, 0.3, 1).dense
     # cells that would need more than 2**20 to a side: the radius grid
     wide = np.vstack([dense, [[1e7, 0, 0]]])
-    assert _clusters._fine_dbscan(wide, 0.3, 5, 1) is None
-    assert _clusters._fine_dbscan(dense, 0.0, 5, 1) is None
+    assert _clusters.fine_grid(wide, 0.3, 1) is None
+    assert _clusters.fine_grid(dense, 0.0, 1) is None
+
+
+def test_components_of_a_mask_on_the_shared_fine_grid(real_sweeps):
+    """The structures step keeps one fine grid of all the non-ground points
+    for the components of each kind of point (a mask) and for the k-nearest
+    search: the same components and neighbours as a grid of their own."""
+    from skpcd.neighbors._neighbors import search_packed
+    from skpcd.segmentation._structures import _components
+
+    xyz = np.ascontiguousarray(read_point_cloud(real_sweeps[5]))
+    eps = 0.4
+    fine = _clusters.fine_grid(xyz, eps, 2)
+    rng = np.random.default_rng(1)
+    for share in (0.3, 0.9):  # the shared grid is used from a quarter up
+        mask = rng.random(len(xyz)) < share
+        mask[: len(xyz) // 2] &= xyz[: len(xyz) // 2, 2] > xyz[:, 2].mean()
+        want = _components(xyz, mask, eps, 2)
+        got = _components(xyz, mask, eps, 2, fine)
+        np.testing.assert_array_equal(got[0], want[0])
+        assert got[1] == want[1]
+    nb = search_packed(xyz, np.array([0, len(xyz)]), n_neighbors=12, n_threads=2)
+    on_fine = search_packed(
+        xyz, np.array([0, len(xyz)]), n_neighbors=12, n_threads=2, grid=fine.grid
+    )
+    np.testing.assert_array_equal(on_fine.indices, nb.indices)
+    np.testing.assert_array_equal(on_fine.sqdist, nb.sqdist)
