@@ -649,12 +649,15 @@ def _cluster_rest(
     seg = _segment_rest(xyz, is_ground, eps=eps, sweep=sweep, **kw)
     if eps is not None or method != "dbscan" or seg.n_segments == 0:
         return seg
-    extent = _robust_extent(xyz)
-    scene = extent.prod()
+    extent = None  # the scene's, measured only for a segment over _MERGED_AREA
     first, floor, merged = seg.eps, None, None
     for _ in range(_MERGED_RETRIES):
         ext, area = _largest_box(xyz, seg.labels)
-        if area <= max(_MERGED_FRACTION * scene, _MERGED_AREA):
+        if area <= _MERGED_AREA:
+            break
+        if extent is None:
+            extent = _robust_extent(xyz)
+        if area <= _MERGED_FRACTION * extent.prod():
             break
         merged = ext if merged is None else merged
         if floor is None:
