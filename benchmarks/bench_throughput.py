@@ -29,7 +29,7 @@ full-density 150 m mobile scan of ``bench_ground.py`` (``BIG``), which
 ``bench_street_segmentation.py`` times its stages on, written as LAS by
 skpcd (9,759,047 points with the simulator of the first rows; 10 M or more
 since, so the "10 M" row is 10 M points from 2026-12-03 on). The "50 M" row
-is the first 50 M points of a 775 m street simulated the same way. Five
+is the first 50 M points of a 775 m street simulated the same way. Six
 jobs:
 
 - ``skpcd``: ``python -m skpcd segment SCAN -o FOLDER`` with the defaults
@@ -40,6 +40,9 @@ jobs:
 - ``skpcd --tile-size 100``: the defaults on 100 m tiles (the scan spilled
   to temporary files and segmented tile by tile: memory bounded by the
   tile);
+- ``skpcd identify``: ``python -m skpcd identify SCAN -o scan.las``: the
+  defaults' segmentation, every segment classified by the shipped street
+  model, and a LAS copy of the scan with each point's segment and class;
 - ``csf+sklearn``: laspy reads the file; the ``CSF`` package with the
   parameters of ``GROUND_PRESETS["csf"]`` (1 m cloth, rigidness 3, slope
   smoothing, 0.3 m threshold, 500 iterations, time step 0.65; its own
@@ -87,13 +90,16 @@ TOOLS = (
     "skpcd",
     "skpcd --no-structures",
     "skpcd --tile-size 100",
+    "skpcd identify",
     "csf+sklearn",
     "csf+open3d",
 )
+# the skpcd jobs: command and options
 SKPCD = {
-    "skpcd": [],
-    "skpcd --no-structures": ["--no-structures"],
-    "skpcd --tile-size 100": ["--tile-size", "100"],
+    "skpcd": ["segment"],
+    "skpcd --no-structures": ["segment", "--no-structures"],
+    "skpcd --tile-size 100": ["segment", "--tile-size", "100"],
+    "skpcd identify": ["identify"],
 }
 STREET_OBJECTS = ("mobile", 40, 0)  # scanner, per class, seed (as in identification)
 MIN_SAMPLES = 5  # skpcd's default, used by the references
@@ -370,8 +376,13 @@ def segment(sizes, repeat, scans, cap_gb, timeout, tools=TOOLS):
                         continue
                     out = tmp / "out"
                     if tool in SKPCD:
-                        cmd = [sys.executable, "-m", "skpcd", "segment", str(scan)]
-                        cmd += ["-o", str(out), *SKPCD[tool]]
+                        command, *options = SKPCD[tool]
+                        target = out
+                        if command == "identify":  # a labelled copy of the scan
+                            out.mkdir()
+                            target = out / "identified.las"
+                        cmd = [sys.executable, "-m", "skpcd", command, str(scan)]
+                        cmd += ["-o", str(target), *options]
                     else:
                         if eps is None:
                             eps = skpcd_eps(scans, scan, tmp)
