@@ -15,6 +15,7 @@ nearest core point within ``eps``. Memory is O(n_points).
 import numpy as np
 from numba import njit
 
+from skpcd.neighbors._grid_kernels import _lower as lower_cell
 from skpcd.neighbors._grid_kernels import cell_block, sqdist_to
 from skpcd.segmentation._union_find import find_root, union_lower
 from skpcd.utils._numba import borrow, keep
@@ -155,7 +156,7 @@ def _near_cells(cell, prev, grid, forward, cur, starts, stops):
         if k_lo > k_hi:
             continue
         if cur[j] < 0:
-            p = _lower_key(cell_key, 0, n_cells, k_lo)
+            p = lower_cell(cell_key, 0, n_cells, k_lo)
         else:
             p = cur[j]
             while p < n_cells and cell_key[p] < k_lo:
@@ -171,16 +172,16 @@ def _near_cells(cell, prev, grid, forward, cur, starts, stops):
     return n
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _lower_key(cell_key, lo, hi, key):
-    """First cell in ``[lo, hi)`` whose key is >= ``key``. Inlined."""
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if cell_key[mid] < key:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
+@njit(cache=True, nogil=True)
+def _run_scratch():
+    """Scratch arrays of :func:`_near_cells`: one cursor per column, and the
+    starts and stops of the runs."""
+    n = _SIDE * _SIDE
+    return (
+        np.full(n, -1, dtype=np.int64),
+        np.empty(n, dtype=np.int64),
+        np.empty(n, dtype=np.int64),
+    )
 
 
 @njit(cache=True, nogil=True)
@@ -193,10 +194,7 @@ def fine_core(lo, hi, grid, r2, min_samples, core):
     the count is reached. Rows are independent: safe in threads."""
     grid, core = borrow(grid, core)
     xs, cell_start = grid.xs, grid.cell_start
-    scratch = np.empty(3 * _SIDE * _SIDE, dtype=np.int64)
-    cur = scratch[: _SIDE * _SIDE]
-    starts = scratch[_SIDE * _SIDE : 2 * _SIDE * _SIDE]
-    stops = scratch[2 * _SIDE * _SIDE :]
+    cur, starts, stops = _run_scratch()
     prev = -1
     for cell in range(lo, hi):
         a, b = cell_start[cell], cell_start[cell + 1]
@@ -215,7 +213,6 @@ def fine_core(lo, hi, grid, r2, min_samples, core):
                     if (t < a or t >= b) and sqdist_to(xs, t, qx, qy, qz) <= r2:
                         count += 1
             core[t0] = count >= min_samples
-    keep(scratch)
 
 
 @njit(cache=True, nogil=True)
@@ -228,10 +225,7 @@ def fine_union(lo, hi, grid, core, r2, parent):
     found. Threads each need a forest of their own (:func:`merge_forest`)."""
     grid, core, parent = borrow(grid, core, parent)
     xs, cell_start = grid.xs, grid.cell_start
-    scratch = np.empty(3 * _SIDE * _SIDE, dtype=np.int64)
-    cur = scratch[: _SIDE * _SIDE]
-    starts = scratch[_SIDE * _SIDE : 2 * _SIDE * _SIDE]
-    stops = scratch[2 * _SIDE * _SIDE :]
+    cur, starts, stops = _run_scratch()
     prev = -1
     for cell in range(lo, hi):
         a, b = cell_start[cell], cell_start[cell + 1]
@@ -247,7 +241,6 @@ def fine_union(lo, hi, grid, core, r2, parent):
                     xs, core, a, b, cell_start[other], cell_start[other + 1], r2
                 ):
                     union_lower(parent, cell, other)
-    keep(scratch)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -280,12 +273,8 @@ def fine_border(lo, hi, grid, core, r2, nearest):
     independent: safe in threads."""
     grid, core, nearest = borrow(grid, core, nearest)
     xs, order, cell_start = grid.xs, grid.order, grid.cell_start
-    scratch = np.empty(5 * _SIDE * _SIDE, dtype=np.int64)
-    cur = scratch[: _SIDE * _SIDE]
-    starts = scratch[_SIDE * _SIDE : 2 * _SIDE * _SIDE]
-    stops = scratch[2 * _SIDE * _SIDE : 3 * _SIDE * _SIDE]
-    p_starts = scratch[3 * _SIDE * _SIDE : 4 * _SIDE * _SIDE]
-    p_stops = scratch[4 * _SIDE * _SIDE :]
+    cur, starts, stops = _run_scratch()
+    _, p_starts, p_stops = _run_scratch()
     prev = -1
     for cell in range(lo, hi):
         a, b = cell_start[cell], cell_start[cell + 1]
@@ -302,7 +291,6 @@ def fine_border(lo, hi, grid, core, r2, nearest):
                     xs, order, core, r2, xs[t0, 0], xs[t0, 1], xs[t0, 2],
                     p_starts, p_stops, n_runs,
                 )  # fmt: skip
-    keep(scratch)
 
 
 @njit(cache=True, nogil=True, inline="always")

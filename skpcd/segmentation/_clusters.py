@@ -44,34 +44,6 @@ EUCLIDEAN_EPS = 0.2
 _MIN_UNION_POINTS = 50_000
 
 
-def _union(grid, core, r2, n_threads):
-    """The union-find forest of the core points within ``sqrt(r2)``: each
-    thread links the core points of a share of the cells (by point count)
-    in a forest of its own, and the forests are merged. Roots are the lowest
-    positions of their components, whatever the threads."""
-    n, n_cells = len(grid.order), grid.n_cells
-    dtype = np.int32 if n < 2**31 - 1 else np.int64
-    n_threads = min(n_threads, max(1, n // _MIN_UNION_POINTS))
-    bounds = np.searchsorted(grid.cell_start, np.linspace(0, n, n_threads + 1)[1:-1])
-    bounds = [0, *bounds.tolist(), n_cells]
-    forests = [np.arange(n, dtype=dtype) for _ in range(n_threads)]
-    args = (grid, core, r2)
-    if n_threads == 1:
-        with parallel_section("union_core"):
-            k.union_core(0, n_cells, *args, forests[0])
-        return forests[0]
-    with parallel_section("union_core"), ThreadPoolExecutor(n_threads) as pool:
-        jobs = [
-            pool.submit(k.union_core, bounds[i], bounds[i + 1], *args, forests[i])
-            for i in range(n_threads)
-        ]
-        for job in jobs:
-            job.result()
-    for other in forests[1:]:
-        k.merge_forest(forests[0], other)
-    return forests[0]
-
-
 def _threaded_forest(kernel, grid, n, args, n_threads):
     """The union-find forest over ``n`` nodes that ``kernel(lo, hi, *args,
     forest)`` links over the grid's cells ``lo`` to ``hi``: each thread
@@ -233,7 +205,9 @@ def grid_dbscan(xyz, eps, min_samples, *, n_jobs=None):
         counts = ball_counts(grid, eps, n_threads)
         core_sorted = counts[grid.order] >= min_samples
         del counts
-    parent = _union(grid, core_sorted, r2, n_threads)
+    parent = _threaded_forest(
+        k.union_core, grid, len(grid.order), (grid, core_sorted, r2), n_threads
+    )
     nearest = np.full(n, -1, dtype=np.int64)
     if not core_sorted.all():
         args = (grid, core_sorted, r2, nearest)
