@@ -290,6 +290,14 @@ def component_covariance(labels, xy, n, mean, cov, count):
 
 
 @njit(cache=True, nogil=True)
+def first_rows(key, first):
+    """The lowest row of each key into ``first`` (-1 beforehand: none)."""
+    for i in range(len(key)):
+        if first[key[i]] < 0:
+            first[key[i]] = i
+
+
+@njit(cache=True, nogil=True)
 def nearest_square(lo, hi, xyz, table, rep, ox, oy, cell, max_ring, out):
     """For points ``lo`` to ``hi``: the square whose representative point
     (``rep[j]``, x and y) is nearest in the plane, into ``out`` (ties: the

@@ -35,6 +35,7 @@ from skpcd.segmentation._structure_kernels import (
     column_counts,
     column_keys,
     component_covariance,
+    first_rows,
     local_shape_rows,
     nearest_square,
     neighbour_share,
@@ -113,25 +114,35 @@ def height_above_ground(xyz, ground_xyz, cell=1.0, n_threads=1):
         return np.zeros(0, dtype=np.float32)
     if len(ground_xyz) == 0:
         return (xyz[:, 2] - xyz[:, 2].min()).astype(np.float32)
-    ij = np.floor((ground_xyz[:, :2] - ground_xyz[:, :2].min(axis=0)) / cell)
-    ij = ij.astype(np.int64)
-    key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
-    uniq, first, inv = np.unique(key, return_index=True, return_inverse=True)
-    zmean = np.bincount(inv, ground_xyz[:, 2]) / np.bincount(inv)
-    centre = ground_xyz[first, :2]  # a ground point of each square
+    origin = ground_xyz[:, :2].min(axis=0)
+    ij = np.floor((ground_xyz[:, :2] - origin) / cell).astype(np.int64)
     shape = (int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1)
-    del key, inv
+    key = ij[:, 0] * shape[1] + ij[:, 1]
     j = np.full(len(xyz), -1, dtype=np.int64)
     if shape[0] * shape[1] <= _MAX_SQUARES:
-        # the squares in a table, searched ring by ring around each point
-        table = np.full(shape, -1, dtype=np.int64)
-        table[ij[first, 0], ij[first, 1]] = np.arange(len(uniq))
-        origin = ground_xyz[:, :2].min(axis=0)
+        # the squares in a table (no sort of the keys), searched ring by
+        # ring around each point; squares numbered in the order of their key
+        n_keys = shape[0] * shape[1]
+        count = np.bincount(key, minlength=n_keys)
+        uniq = np.flatnonzero(count)
+        zmean = np.bincount(key, ground_xyz[:, 2], minlength=n_keys)[uniq] / count[uniq]
+        first = np.full(n_keys, -1, dtype=np.int64)
+        first_rows(key, first)
+        first = first[uniq]
+        table = np.full(n_keys, -1, dtype=np.int64)
+        table[uniq] = np.arange(len(uniq))
+        centre = ground_xyz[first, :2]  # a ground point of each square
+        del key, count, first
         parallel_rows(
-            nearest_square, len(xyz), n_threads, xyz, table, centre,
+            nearest_square, len(xyz), n_threads, xyz, table.reshape(shape), centre,
             float(origin[0]), float(origin[1]), float(cell), _SQUARE_RINGS, j,
         )  # fmt: skip
         del table
+    else:
+        uniq, first, inv = np.unique(key, return_index=True, return_inverse=True)
+        zmean = np.bincount(inv, ground_xyz[:, 2]) / np.bincount(inv)
+        centre = ground_xyz[first, :2]
+        del key, inv
     del ij, uniq
     far = np.flatnonzero(j < 0)
     if len(far):
