@@ -21,6 +21,11 @@ ON_FIRST_USE = {
     "pynndescent",
     "pyogrio",  # the gis extra: GeoPackage inventories
     "skops",
+    # the spacing's search among many points (numba, and skpcd.utils, which
+    # loads scikit-learn): `skpcd info` loads the spacing module alone and
+    # needs neither on a small file
+    "skpcd.preprocessing._spacing_kernels",
+    "skpcd.utils._geometry",
     "sklearn.tree",
     "tqdm",  # progress bars: drawn only on a terminal, not at --help
 }
