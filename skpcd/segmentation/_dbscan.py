@@ -15,6 +15,7 @@ import typing
 from numbers import Integral, Real
 
 import numpy as np
+from scipy.spatial import cKDTree
 from sklearn.base import ClusterMixin
 from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import Interval
@@ -109,20 +110,26 @@ def _kdist_curve(xyz, n_neighbors, max_samples, random_state, n_jobs):
     n = len(xyz)
     k_max = min(int(n_neighbors), n - 1)
     rows = sample_queries(n, max_samples, random_state)
-    # the k nearest of the sampled points on the grid (the same as a k-d
-    # tree's), their distances computed as cKDTree computes them: the same
-    # curve, bit for bit, as the tiled estimate's trees give
     threads = effective_threads(n_jobs)
-    nb = search_packed(
-        xyz, np.array([0, n]), n_neighbors=k_max + 1, n_threads=threads,
-        algorithm="grid", with_sqdist=False, rows=rows,
-    )  # fmt: skip
-    near = nb.indices.reshape(len(rows), k_max + 1)
-    e = xyz[near] - xyz[rows][:, None, :]
-    dist = np.sqrt(
-        (e[..., 0] * e[..., 0] + e[..., 1] * e[..., 1]) + e[..., 2] * e[..., 2]
-    )
-    del e, near
+    if len(rows) == n:  # every point: a k-d tree of them is the faster
+        tree = cKDTree(xyz, balanced_tree=False, compact_nodes=False)
+        dist, _ = tree.query(xyz, k=k_max + 1, workers=threads)
+        dist = dist.reshape(n, -1)
+    else:
+        # a sample of a large cloud: its k nearest on the grid (no tree of
+        # all points), their distances computed as cKDTree computes them:
+        # the same curve, bit for bit, as a tree (and the tiled estimate's
+        # trees) gives
+        nb = search_packed(
+            xyz, np.array([0, n]), n_neighbors=k_max + 1, n_threads=threads,
+            algorithm="grid", with_sqdist=False, rows=rows,
+        )  # fmt: skip
+        near = nb.indices.reshape(len(rows), k_max + 1)
+        e = xyz[near] - xyz[rows][:, None, :]
+        dist = np.sqrt(
+            (e[..., 0] * e[..., 0] + e[..., 1] * e[..., 1]) + e[..., 2] * e[..., 2]
+        )
+        del e, near
     # column 0 is the point itself (or a duplicate of it: distance 0 either way)
     return np.arange(1, k_max + 1), kdist_mean(dist[:, 1:])
 
