@@ -78,10 +78,12 @@ _WIRE_COLUMN_POINTS = 3  # most points 0.3-2 m above or below a wire point
 _FLAT_SHARE = 0.5  # planar share of a cluster touching a facade that joins it
 
 
-# The squares of height_above_ground are searched in a table when there are
-# at most this many in the ground's bounding box, and this many rings of
-# squares around a point before a k-d tree answers it.
-_MAX_SQUARES = 1 << 24
+# The squares of height_above_ground are searched in a table when the
+# ground's bounding box holds at most this many squares per ground point (a
+# few arrays of its size: memory of the order of the points, whatever a far
+# outlier does to the box), and this many rings of squares around a point
+# before a k-d tree answers it.
+_SQUARES_PER_POINT = 4
 _SQUARE_RINGS = 8
 
 
@@ -93,8 +95,8 @@ def height_above_ground(xyz, ground_xyz, cell=1.0, n_threads=1):
     (its first), ties to the lower square; the squares holding ground are
     searched in rings around each point in a table of the ground's
     bounding box (a k-d tree of the representatives when that box holds
-    over ``_MAX_SQUARES`` squares, or for a point with no ground square
-    within ``_SQUARE_RINGS`` rings).
+    over ``_SQUARES_PER_POINT`` squares per ground point, or for a point
+    with no ground square within ``_SQUARE_RINGS`` rings).
 
     Parameters
     ----------
@@ -119,7 +121,7 @@ def height_above_ground(xyz, ground_xyz, cell=1.0, n_threads=1):
     shape = (int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1)
     key = ij[:, 0] * shape[1] + ij[:, 1]
     j = np.full(len(xyz), -1, dtype=np.int64)
-    if shape[0] * shape[1] <= _MAX_SQUARES:
+    if shape[0] * shape[1] <= _SQUARES_PER_POINT * max(len(ground_xyz), 1 << 14):
         # the squares in a table (no sort of the keys), searched ring by
         # ring around each point; squares numbered in the order of their key
         n_keys = shape[0] * shape[1]

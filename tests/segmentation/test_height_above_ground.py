@@ -42,7 +42,7 @@ def test_equals_the_kd_tree_on_a_real_sweep(sweep, n_threads):
 
 def test_without_the_table_the_kd_tree_answers(sweep, monkeypatch):
     rest, ground = sweep
-    monkeypatch.setattr(_structures, "_MAX_SQUARES", 0)
+    monkeypatch.setattr(_structures, "_SQUARES_PER_POINT", 0)
     np.testing.assert_array_equal(
         height_above_ground(rest, ground), reference(rest, ground)[0]
     )
