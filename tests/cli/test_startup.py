@@ -193,17 +193,6 @@ def test_a_first_run_compiles_only_the_stages_it_runs(tmp_path):
     assert not any(s.startswith("ground") for s in stages)
 
 
-def _hugepage_flag(code):
-    """numpy's huge-page flag after running ``code`` in a fresh process,
-    with ``NUMPY_MADVISE_HUGEPAGE`` removed from or set in its environment."""
-    probe = (
-        "from numpy._core.multiarray import _set_madvise_hugepage as flag\n"
-        f"{code}\n"
-        "print(flag(False))\n"
-    )
-    return probe
-
-
 @pytest.mark.parametrize(
     "env, want", [(None, "False"), ("1", "True")], ids=["default", "user's choice"]
 )
@@ -214,9 +203,12 @@ def test_commands_run_on_small_pages_unless_the_user_says(tmp_path, env, want):
     environ = {k: v for k, v in os.environ.items() if k != "NUMPY_MADVISE_HUGEPAGE"}
     if env is not None:
         environ["NUMPY_MADVISE_HUGEPAGE"] = env
-    code = _hugepage_flag(
+    # a command, then numpy's huge-page flag (returned as it was when set)
+    code = (
+        "from numpy._core.multiarray import _set_madvise_hugepage as flag\n"
         "from skpcd.cli import main\n"
-        f"main(['simulate', '-o', {str(tmp_path / 'sim')!r}, '--quiet'])"
+        f"main(['simulate', '-o', {str(tmp_path / 'sim')!r}, '--quiet'])\n"
+        "print(flag(False))\n"
     )
     done = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, env=environ,
