@@ -444,11 +444,16 @@ def _search_packed(
     return nb, grid.order
 
 
+def _occupancy_target(k):
+    """Points a cell of a k-nearest search's grid is sized to hold."""
+    return max(1.0, _OCCUPANCY * k)
+
+
 def suits_knn(grid, k):
     """Whether a grid of one cloud holds about as many points a cell as
     the k-nearest search sizes its own for (within a factor 2): a search
     on it is as fast."""
-    target = max(1.0, _OCCUPANCY * k)
+    target = _occupancy_target(k)
     occupancy = len(grid.order) / max(grid.n_cells, 1)
     return target / 2 <= occupancy <= 2 * target
 
@@ -459,7 +464,7 @@ def _knn_grid(xyz, offsets, k, lo_hi=None, n_threads=1):
     Returns the :class:`~skpcd.neighbors._grid.VoxelGrid`.
     """
     sizes = np.diff(offsets)
-    target = max(1.0, _OCCUPANCY * k)
+    target = _occupancy_target(k)
     lo, hi = cloud_bounds(xyz, offsets) if lo_hi is None else lo_hi
     e = np.sort(hi - lo, axis=1)
     # first guess: points spread over the largest face of the bounding box
