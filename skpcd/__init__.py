@@ -38,6 +38,7 @@ _SUBMODULES = (
     "exceptions",
     "features",
     "io",
+    "metrics",
     "preprocessing",
     "segmentation",
     "utils",

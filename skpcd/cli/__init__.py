@@ -2,7 +2,8 @@
 
 One module per command (or pair of commands), each with ``add_parser(s)``
 and ``run_*`` functions: ``_info`` (info), ``_evaluate`` (evaluate, score),
-``_model`` (fit, predict), ``_describe`` (describe), ``_segment`` (segment,
+``_model`` (fit, predict), ``_scan_labels`` (score-scan, and the options
+of fit on labelled scans), ``_describe`` (describe), ``_segment`` (segment,
 identify), ``_simulate`` (simulate); ``_common`` holds the shared options,
 the output checks and the way a command ends (:func:`skpcd.cli._common.run`).
 """
@@ -45,6 +46,7 @@ from skpcd.cli import (  # noqa: E402
     _info,
     _model,
     _review,
+    _scan_labels,
     _segment,
     _simulate,
 )
@@ -73,6 +75,7 @@ def build_parser():
     _info.add_parser(sub)
     _evaluate.add_parsers(sub)
     _model.add_parsers(sub)
+    _scan_labels.add_parser(sub)
     _describe.add_parser(sub)
     _segment.add_parsers(sub)
     _review.add_parser(sub)

@@ -568,7 +568,13 @@ def labels_path(args):
     default = Path(args.folder) / "labels.csv"
     if not default.is_file():
         raise CommandError(
-            args.command, f"{args.folder} has no labels.csv; pass --labels CSV"
+            args.command,
+            f"{args.folder} has no labels.csv; pass --labels CSV"
+            + (
+                ", or --labels-from FIELD for scans labelled point by point"
+                if args.command == "fit"
+                else ""
+            ),
         )
     return default
 

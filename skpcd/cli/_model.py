@@ -2,6 +2,7 @@
 
 import csv
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -23,6 +24,8 @@ from skpcd.cli._common import (
     unique_counts,
 )
 from skpcd.cli._evaluate import add_pipeline_option
+from skpcd.cli._scan_labels import add_scan_label_options, instances_option
+from skpcd.exceptions import PointCloudFileError
 
 
 def add_parsers(sub):
@@ -30,14 +33,30 @@ def add_parsers(sub):
         "fit",
         help="fit an identification pipeline (the default one unless --pipeline) "
         "and save it",
-        description="Fit the default pipeline on labelled segments and save it "
+        description="Fit the default pipeline on labelled segments, or on objects "
+        "cut from scans labelled point by point, and save it "
         "(skops format, with a checksum and the skpcd and scikit-learn versions; "
         "loading it runs no code from the file).",
     )
-    fit.add_argument("folder", help="folder of per-segment files")
+    fit.add_argument(
+        "paths",
+        nargs="+",
+        metavar="PATH",
+        help="a folder of per-segment files (labels in labels.csv or --labels), "
+        "or scans labelled point by point: LAS/LAZ, PLY, PCD, text or KITTI .bin "
+        "files, and folders of them (SemanticKITTI's sequences/NN layout too)",
+    )
     add_pipeline_option(fit)
     fit.add_argument(
         "--labels", help="CSV of file,label rows (default: FOLDER/labels.csv)"
+    )
+    add_scan_label_options(fit)
+    fit.add_argument(
+        "--min-purity",
+        type=float,
+        default=0.5,
+        help="labelled scans: the least share of its majority class a segment "
+        "needs to be kept (default 0.5)",
     )
     fit.add_argument("-o", "--output", required=True, help="model file (.skpcd)")
     fit.add_argument("--random-state", type=int, default=0, help="seed (default 0)")
@@ -100,13 +119,71 @@ def add_parsers(sub):
     return fit, pred
 
 
+def _from_scans(args):
+    """Whether ``skpcd fit`` reads scans labelled point by point (not one
+    folder of segments)."""
+    given = args.labels_from or args.instances_from or args.class_map
+    single = len(args.paths) == 1 and Path(args.paths[0]).is_dir()
+    if given or not single:
+        if args.labels is not None:
+            raise CommandError(
+                "fit",
+                "--labels names the labels of a folder of segments; scans "
+                "labelled point by point take --labels-from FIELD",
+            )
+        return True
+    args.folder = args.paths[0]
+    return False
+
+
+def _labelled_objects(args):
+    """The objects cut from labelled scans: ``(clouds, y, source, inputs)``."""
+    from skpcd.datasets import objects_from_labelled_scans
+    from skpcd.io import labelled_scan_paths
+    from skpcd.utils._progress import stage
+
+    scans = labelled_scan_paths(args.paths)
+    with stage(f"cutting objects from {len(scans)} labelled scans"):
+        try:
+            found = objects_from_labelled_scans(
+                scans,
+                args.labels_from,
+                instances=instances_option(args.instances_from),
+                class_map=args.class_map,
+                min_purity=args.min_purity,
+                n_jobs=args.n_jobs,
+            )
+        except ValueError as exc:
+            if isinstance(exc, PointCloudFileError):
+                raise
+            raise CommandError("fit", str(exc)) from exc
+    cuts = ", ".join(
+        f"{int((found.cut == c).sum())} by {c}" for c in ("instance", "segment")
+    )
+    print(
+        f"objects   {len(found.clouds)} from {len(scans)} scans ({cuts}), "
+        f"purity median {np.median(found.purity):.2f}; left out "
+        + ", ".join(f"{n} {why}" for why, n in found.left_out.items())
+    )
+    source = f"{len(scans)} labelled scans"
+    return found.clouds, np.asarray(found.labels).astype(str), source, scans
+
+
 def run_fit(args):
     from skpcd.classification import PIPELINES, make_named_pipeline
     from skpcd.io import save_model
     from skpcd.utils._progress import stage
 
-    out = check_output(args.output, args, "fit", inputs=[labels_path(args)])
-    clouds, y, source, inputs = load_labelled(args)
+    if not 0 <= args.min_purity <= 1:
+        raise CommandError(
+            "fit", f"--min-purity must be within 0 and 1, got {args.min_purity}"
+        )
+    if _from_scans(args):
+        out = check_output(args.output, args, "fit", inputs=args.paths)
+        clouds, y, source, inputs = _labelled_objects(args)
+    else:
+        out = check_output(args.output, args, "fit", inputs=[labels_path(args)])
+        clouds, y, source, inputs = load_labelled(args)
     check_not_an_input(out, "fit", inputs)
     classes, counts = np.unique(y, return_counts=True)
     if len(classes) < 2 and args.pipeline == "default":

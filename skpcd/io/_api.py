@@ -40,6 +40,7 @@ _FORMATS = {
     ".pcd": "_pcd",
     ".las": "_las",
     ".laz": "_las",
+    ".bin": "_kitti",
 }
 SUPPORTED_EXTENSIONS = tuple(_FORMATS)
 
@@ -119,7 +120,8 @@ def read_point_cloud(path, *, fields=None, nonfinite="drop"):
         The file. Its extension selects the format: ``.xyz``, ``.txt``,
         ``.pts``, ``.csv`` (text), ``.npy``, ``.ply`` (ascii, binary little or
         big endian), ``.pcd`` (ascii, binary, binary_compressed) and
-        ``.las``/``.laz`` (through laspy and lazrs).
+        ``.las``/``.laz`` (through laspy and lazrs) and ``.bin`` (KITTI
+        Velodyne: float32 x, y, z, remission, read as ``intensity``).
     fields : None, "all" or list of str, default=None
         Extra per-point fields to return besides xyz, by their name in the
         file (``"intensity"``, ``"classification"``...). ``"normals"`` and
@@ -165,6 +167,13 @@ def read_point_cloud(path, *, fields=None, nonfinite="drop"):
     >>> points.shape, extras["intensity"].tolist()
     ((3, 3), [1.0, 2.0, 3.0])
     """
+    return read_fields(path, fields, nonfinite=nonfinite)
+
+
+def read_fields(path, fields=None, *, nonfinite="drop", optional=()):
+    """:func:`read_point_cloud`, with ``optional``: more fields returned in
+    ``extras`` only when the file has them (the first of each tuple of
+    names it has, under that name)."""
     if nonfinite not in ("drop", "keep", "raise"):
         raise ValueError(
             f"nonfinite must be 'drop', 'keep' or 'raise', got {nonfinite!r}"
@@ -189,6 +198,9 @@ def read_point_cloud(path, *, fields=None, nonfinite="drop"):
         wanted = [fields]
     else:
         wanted = list(fields)
+    for names in optional:
+        present = [n for n in names if n in data and n not in wanted]
+        wanted += present[:1]
     extras = {name: _pick(data, name, path) for name in wanted}
     if len(points) == 0:
         raise PointCloudFileError(path, "the file declares no points.")
@@ -213,7 +225,7 @@ def read_point_cloud(path, *, fields=None, nonfinite="drop"):
             stacklevel=2,
         )
         points, extras = take_rows(finite, points, extras)
-    if fields is None:
+    if fields is None and not optional:
         return points
     return points, extras
 
