@@ -48,6 +48,26 @@ def real_sweeps():
     return paths
 
 
+REAL_LABELLED_DIR = Path(
+    os.environ.get(
+        "SKPCD_REAL_LABELLED_DIR", ROOT.parent / "shared" / "data" / "real_labelled"
+    )
+)
+
+
+@pytest.fixture(scope="session")
+def real_labelled():
+    """The folder of real sweeps labelled point by point (SemanticKITTI,
+    nuScenes, PandaSet; a ``semantic`` dimension of SemanticKITTI ids), as
+    a function of a file name to its path (missing: skipped)."""
+    scans = REAL_LABELLED_DIR / "scans"
+    if not scans.is_dir():
+        pytest.skip(
+            f"no labelled sweeps at {REAL_LABELLED_DIR} (set SKPCD_REAL_LABELLED_DIR)"
+        )
+    return lambda name: scans / name
+
+
 @pytest.fixture(scope="session")
 def dales(dales_dir):
     """All DALES objects as ``(clouds, labels, names)``."""

@@ -5,6 +5,9 @@ import re
 import numpy as np
 from sklearn.utils import Bunch
 
+from skpcd.io._point_labels import read_point_labels
+from skpcd.segmentation import segment_scene
+
 __all__ = ["GROUND_CLASSES", "objects_from_labelled_scans"]
 
 #: class names (lower case, words joined by ``_``) of ground points: left
@@ -123,9 +126,6 @@ def objects_from_labelled_scans(
     skpcd.io.read_point_labels : Read one labelled scan.
     skpcd.metrics.scan_scores : Score a labelled scan point by point.
     """
-    from skpcd.io._point_labels import read_point_labels
-    from skpcd.segmentation import segment_scene
-
     if not 0 <= min_purity <= 1:
         raise ValueError(f"min_purity must be within 0 and 1, got {min_purity}")
     ground = {_key(g) for g in ground}

@@ -27,6 +27,8 @@ from skpcd.io._api import (
     read_point_cloud,
 )
 from skpcd.io._class_codes import ASPRS_NAMES
+from skpcd.io._labelled import read_class_names
+from skpcd.io._las_reader import read_vlr_records
 
 __all__ = [
     "IGNORE",
@@ -290,8 +292,6 @@ def _integer_codes(path, field, values):
 def _las_names(path):
     """Class names of a LAS/LAZ ``classification``: the Classification Lookup
     VLR (or the full names of an skpcd VLR) over the ASPRS names."""
-    from skpcd.io._las_reader import read_vlr_records
-
     names = dict(ASPRS_NAMES)
     full = {}
     for user_id, record_id, data in read_vlr_records(path):
@@ -482,8 +482,6 @@ def read_predicted_labels(path, field=None, *, class_map=None):
         )
     codes = _integer_codes(path, "class", fields["class"])
     if path.suffix.lower() in _LAS:
-        from skpcd.io._labelled import read_class_names
-
         table = {0: "unclassified", **read_class_names(path)}
     else:
         table = {-1: "unclassified", **_side_names(path)}
