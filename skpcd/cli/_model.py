@@ -122,6 +122,8 @@ def add_parsers(sub):
 def _from_scans(args):
     """Whether ``skpcd fit`` reads scans labelled point by point (not one
     folder of segments)."""
+    for path in args.paths:
+        check_folder(path, "fit")  # a misspelled name: "does not exist"
     given = args.labels_from or args.instances_from or args.class_map
     single = len(args.paths) == 1 and Path(args.paths[0]).is_dir()
     if given or not single:
