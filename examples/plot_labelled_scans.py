@@ -158,7 +158,7 @@ print(f"trained on one scan, tested on the other: accuracy {np.round(accuracy, 2
 # calls of :func:`skpcd.cli.main` below are those of the command line.
 model = make_street_pipeline(n_jobs=-1).fit(objects.clouds, objects.labels)
 save_model(model, folder / "model.skpcd")
-skpcd.cli.main(
+status = skpcd.cli.main(
     [
         "identify",
         str(folder / "street_3.ply"),
@@ -176,7 +176,7 @@ skpcd.cli.main(
 # ``unclassified``, ground points ``ground``) and the truth from the CloudCompare
 # field, names both with the class map, and prints the IoU of every true class,
 # their mean (mIoU), the overall accuracy and the confusion matrix.
-skpcd.cli.main(
+status = skpcd.cli.main(
     [
         "score-scan",
         str(folder / "identified.ply"),
@@ -259,3 +259,4 @@ for ax, labels, title in ((axes[0], truth, "labels"), (axes[1], pred, "identify"
         fontsize="x-small", loc="upper left", bbox_to_anchor=(1.01, 1), markerscale=8
     )
 axes[1].set_xlabel("x (m)")
+plt.show()
