@@ -142,3 +142,60 @@ def test_a_missing_key_names_the_file_and_the_key(tmp_path):
         match=r"descriptors\.json: no \['ratios'\]\[3\]\['cpu_ratio'\]",
     ):
         perf.render("descriptor_speedups", tmp_path)
+
+
+def test_scene_labels_leave_out_the_classes_a_source_does_not_score():
+    data = json.loads((RESULTS / "scene_labels.json").read_text())
+    header, rows, _ = perf.table("scene_labels")
+    expected = [
+        (source, model)
+        for source, block in data["sources"].items()
+        for model in block["models"]
+    ]
+    assert len(rows) == len(expected)
+    for row, (source, model) in zip(rows, expected):
+        block = data["sources"][source]
+        scores = block["models"][model]["scores"]
+        assert row[1] == model
+        for c in perf.SCENE_CLASSES:
+            cell = row[header.index(f"{c} IoU %")]
+            if c in block["classes"]:
+                assert cell.values == (scores["iou"][c],), (source, model, c)
+            else:
+                assert cell == "", (source, model, c)
+        # the mIoU shown is the mean over the classes scored, and only those
+        iou = [scores["iou"][c] for c in block["classes"]]
+        assert row[header.index("mIoU %")].values == (scores["miou"],)
+        assert math.isclose(scores["miou"], sum(iou) / len(iou))
+
+
+def test_scene_labels_blank_a_class_the_source_lacks(tmp_path):
+    scores = {"miou": 0.5, "iou": {"ground": 0.9, "car": 0.1}}
+    row = {
+        "scores": scores,
+        "manmade_union": {"miou": 0.4},
+        "time": {"wall_s_median": 7},
+    }
+    (tmp_path / "scene_labels.json").write_text(
+        json.dumps(
+            {
+                "sources": {
+                    "nuscenes": {
+                        "sensor": "HDL-32E",
+                        "classes": ["ground", "car"],
+                        "models": {"shipped": row},
+                    }
+                }
+            }
+        )
+    )
+    header, rows, _ = perf.table("scene_labels", tmp_path)
+    shown = dict(zip(header, map(str, rows[0])))
+    assert shown["source (sensor)"] == "nuscenes (HDL-32E)"
+    assert (shown["mIoU %"], shown["ground IoU %"], shown["car IoU %"]) == (
+        "50.0",
+        "90.0",
+        "10.0",
+    )
+    assert shown["building IoU %"] == shown["manmade IoU %"] == ""
+    assert shown["identify, s per scan"] == "7.0"
