@@ -169,6 +169,7 @@ def run_score_scan(args):
         truth, pred = _read_pair(pred_path, truth_path, args, class_map)
         all_truth.append(truth)
         all_pred.append(pred)
+        _warn_if_disjoint(truth, pred, pred_path)
         try:
             scores = scan_scores(truth, pred, classes=_present(classes, truth))
         except ValueError as exc:
@@ -198,6 +199,28 @@ def run_score_scan(args):
         if not args.quiet:
             print(f"\nwritten   {out}")
     return 0
+
+
+def _warn_if_disjoint(truth, pred, path):
+    """One line when no true class is a predicted one: the names of the two
+    sides differ (codes against names), which a --map reconciles."""
+    import warnings
+
+    import numpy as np
+
+    def listed(names):
+        names = sorted(names)
+        return ", ".join(names[:6]) + (", ..." if len(names) > 6 else "")
+
+    true, predicted = set(np.unique(truth)) - {"ignore"}, set(np.unique(pred))
+    if true and not true & predicted:
+        warnings.warn(
+            f"{path}: no true class ({listed(true)}) is a predicted class "
+            f"({listed(predicted)}): every IoU is 0; name both sides alike "
+            "with --map",
+            UserWarning,
+            stacklevel=2,
+        )
 
 
 def _present(classes, truth):

@@ -9,6 +9,7 @@ import importlib
 _PUBLIC = {
     "SUPPORTED_EXTENSIONS": "skpcd.io._api",
     "LasExtent": "skpcd.io._las",
+    "PointLabels": "skpcd.io._point_labels",
     "iter_points": "skpcd.io._las",
     "labelled_scan_paths": "skpcd.io._point_labels",
     "load_model": "skpcd.io._model",

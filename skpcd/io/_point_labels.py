@@ -27,7 +27,7 @@ from skpcd.io._api import (
     read_point_cloud,
 )
 from skpcd.io._class_codes import ASPRS_NAMES
-from skpcd.io._labelled import read_class_names
+from skpcd.io._labelled import ORIGINAL, read_class_names
 from skpcd.io._las_reader import read_vlr_records
 
 __all__ = [
@@ -345,7 +345,11 @@ def _read_field(path, field, instances):
     objects = None
     if instances is not None:
         objects = _integer_codes(path, instances, extras[instances])
-    names = _las_names(path) if suffix in _LAS and field == "classification" else {}
+    names = {}
+    if suffix in _LAS and field == "classification":
+        names = _las_names(path)
+    elif suffix in _LAS and field == ORIGINAL:  # skpcd identify's copy
+        names = dict(ASPRS_NAMES)
     raw = np.asarray(extras[field])
     limit = np.iinfo(raw.dtype).max if raw.dtype.kind in "iu" else None
     return points, codes, objects, names, limit
@@ -376,8 +380,9 @@ def read_point_labels(
     class_map : str, path-like or ClassMap, default=None
         How codes become class names (:func:`read_class_map`). Codes it does
         not name keep their default name: the file's Classification Lookup
-        VLR or the ASPRS name for a LAS ``classification``, SemanticKITTI's
-        names for a ``.label``, the code as text otherwise.
+        VLR or the ASPRS name for a LAS ``classification``, the ASPRS name
+        for the ``original_classification`` that ``skpcd identify`` keeps,
+        SemanticKITTI's names for a ``.label``, the code as text otherwise.
     nonfinite : {"drop", "keep"}, default="drop"
         Points with NaN or infinite coordinates: dropped with their labels,
         or kept (their labels too).
@@ -520,11 +525,13 @@ def _side_names(path):
 def labelled_scan_paths(paths):
     """The scans named by files and folders, in order.
 
-    A file is kept as it is. A folder gives its scans, sorted: the files
-    of a point-cloud extension in it (a ``.bin`` only with a ``.label``
-    beside it or in ``../labels/``), or, for SemanticKITTI's layout, the
-    ``.bin`` files of its ``velodyne/`` folder (a sequence folder) or of
-    every ``*/velodyne/`` below it (the ``sequences/`` folder).
+    A file is kept as it is. A folder gives its scans, sorted: in
+    SemanticKITTI's layout, the ``.bin`` files of its ``velodyne/`` folder
+    (a sequence folder, whose ``calib.txt`` and ``poses.txt`` are not
+    scans) or of every ``*/velodyne/`` below it (the ``sequences/``
+    folder), each with its ``.label``; otherwise the files of a point-cloud
+    extension in it (a ``.bin`` only with a ``.label`` beside it or in
+    ``../labels/``).
 
     Parameters
     ----------
@@ -547,20 +554,24 @@ def labelled_scan_paths(paths):
         if not path.is_dir():
             out.append(path)
             continue
+        # SemanticKITTI's layout first: a sequence folder (velodyne/ beside
+        # calib.txt, poses.txt...) or the folder of sequences
         found = [
             p
-            for p in sorted(path.iterdir())
-            if p.is_file()
-            and p.suffix.lower() in SUPPORTED_EXTENSIONS
-            and not p.name.startswith(".")
-            and (p.suffix.lower() != ".bin" or _has_label(p))
+            for velodyne in sorted([path / "velodyne", *path.glob("*/velodyne")])
+            if velodyne.is_dir()
+            for p in sorted(velodyne.glob("*.bin"))
+            if _has_label(p)
         ]
         if not found:
-            for velodyne in sorted([path / "velodyne", *path.glob("*/velodyne")]):
-                if velodyne.is_dir():
-                    found += [
-                        p for p in sorted(velodyne.glob("*.bin")) if _has_label(p)
-                    ]
+            found = [
+                p
+                for p in sorted(path.iterdir())
+                if p.is_file()
+                and p.suffix.lower() in SUPPORTED_EXTENSIONS
+                and not p.name.startswith(".")
+                and (p.suffix.lower() != ".bin" or _has_label(p))
+            ]
         if not found:
             raise MissingFileError(path, "holds no labelled scan")
         out += found

@@ -152,6 +152,17 @@ def test_round_trip_scores_one(fitted, capsys):
     assert all(v == 1.0 for v in pooled["iou"].values()) and pooled["accuracy"] == 1
 
 
+def test_score_scan_warns_when_no_class_is_shared(fitted, capsys):
+    """The scan's own codes against skpcd's names: every IoU 0, said in one
+    line; the original classification kept by identify gets ASPRS names."""
+    _, _, out, _ = fitted
+    assert main(["score-scan", str(out), "--truth", "semantic", "--quiet"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and re.search("no true class .* is a predicted class", err[0])
+    truth = read_point_labels(out, "original_classification")
+    assert set(truth.labels) == {"never classified"}  # the sweep's classification is 0
+
+
 def _fails(capsys, pattern, argv):
     """The command ends with a one-line error matching ``pattern`` (status 1
     for a file at fault, SystemExit for a command that cannot run)."""

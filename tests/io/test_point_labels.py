@@ -157,6 +157,8 @@ def test_semantickitti_bin_and_label_real(tmp_path, real_labelled):
     truth = _kitti_layout(
         tmp_path, real_labelled, [KITTI, "semantickitti_05_000000.laz"]
     )
+    for name in ("calib.txt", "poses.txt", "times.txt"):  # as SemanticKITTI has
+        (tmp_path / "sequences" / "01" / name).write_text("0 0 0\n")
     scans = labelled_scan_paths([tmp_path / "sequences"])
     assert [p.relative_to(tmp_path).as_posix() for p in scans] == [
         "sequences/00/velodyne/000000.bin",
