@@ -257,7 +257,7 @@ def segment_scene(
         Take facades and overhead wires out before clustering, as segments
         of their own, and split clusters at vertical trunks (see Notes). A
         dict overrides the parameters of ``STRUCTURE_DEFAULTS`` (lengths in
-        metres): ``facade_min_height`` (3.0) and ``facade_min_length``
+        metres): ``facade_min_height`` (2.0) and ``facade_min_length``
         (4.0), the smallest vertical and horizontal extent of a facade;
         ``wire_min_height`` (3.0), the lowest a wire runs above the ground,
         ``wire_min_length`` (4.0) its shortest horizontal length and

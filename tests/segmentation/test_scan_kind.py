@@ -207,9 +207,11 @@ def test_sweep_coordinates_scale_with_the_range(shift, turn):
 def test_a_radius_proportional_to_the_range_keeps_close_objects_apart(
     real_sweeps, monkeypatch
 ):
-    # measured on this KITTI sweep: with one radius (0.34 m, capped at 0.75)
-    # the boxed car's segment is 4 % car; with a radius proportional to the
-    # range (about 2 % of it here), 70 %
+    # measured on this KITTI sweep, without the structures step: with one
+    # radius (0.34 m, capped at 0.75) the boxed cars' segments are 4 % car;
+    # with a radius proportional to the range (about 2 % of it here), 78 %.
+    # (With it, the 2 m facades take out the low wall that joins them: 99 %
+    # whatever the radius, so the radius is measured alone.)
     path = next(p for p in real_sweeps if p.stem == "kitti_object_000002")
     xyz, _, inst = read_sweep(path)
 
@@ -222,9 +224,9 @@ def test_a_radius_proportional_to_the_range_keeps_close_objects_apart(
                 out.append((inst[seg.labels == best] == i).mean())
         return np.mean(out)
 
-    relative = purity(segment_scene(xyz, n_jobs=2))
+    relative = purity(segment_scene(xyz, n_jobs=2, structures=False))
     monkeypatch.delitem(SCAN_KINDS["spinning"], "relative_eps_scale")
-    fixed = purity(segment_scene(xyz, n_jobs=2))
+    fixed = purity(segment_scene(xyz, n_jobs=2, structures=False))
     assert relative > 0.5 > 0.2 > fixed
 
 
