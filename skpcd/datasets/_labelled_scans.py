@@ -1,10 +1,9 @@
 """Objects to train on, cut from scans labelled point by point."""
 
-import re
-
 import numpy as np
 from sklearn.utils import Bunch
 
+from skpcd.io._class_codes import _key
 from skpcd.io._point_labels import read_point_labels
 from skpcd.segmentation import segment_scene
 
@@ -22,10 +21,6 @@ GROUND_CLASSES = (
     "other_ground",
     "lane_marking",
 )
-
-
-def _key(name):
-    return re.sub(r"[\s\-]+", "_", str(name).strip().lower())
 
 
 def _majority(labels, groups, n_groups):
@@ -128,14 +123,15 @@ def objects_from_labelled_scans(
     """
     if not 0 <= min_purity <= 1:
         raise ValueError(f"min_purity must be within 0 and 1, got {min_purity}")
+    if min_points < 1:
+        raise ValueError(f"min_points must be at least 1, got {min_points}")
     ground = {_key(g) for g in ground}
     clouds, labels, scan_of, purity, sizes, cut = [], [], [], [], [], []
     left_out = {"ground": 0, "ignored": 0, "impure": 0, "small": 0}
     for s, path in enumerate(scans):
         scan = read_point_labels(path, field, instances=instances, class_map=class_map)
-        points, names = scan.points, scan.labels
-        named = names != "ignore"
-        objects = scan.instances if scan.instances is not None else None
+        points, names, objects = scan.points, scan.labels, scan.instances
+        named = ~scan.ignored
         has_object = np.zeros(len(points), dtype=bool)
         groups_list = []
         if objects is not None and (objects > 0).any():
