@@ -3,7 +3,7 @@
 import numpy as np
 from sklearn.utils import Bunch
 
-from skpcd.io._class_codes import _key
+from skpcd.io._class_codes import class_key
 from skpcd.io._point_labels import read_point_labels
 from skpcd.segmentation import segment_scene
 
@@ -125,7 +125,7 @@ def objects_from_labelled_scans(
         raise ValueError(f"min_purity must be within 0 and 1, got {min_purity}")
     if min_points < 1:
         raise ValueError(f"min_points must be at least 1, got {min_points}")
-    ground = {_key(g) for g in ground}
+    ground = {class_key(g) for g in ground}
     clouds, labels, scan_of, purity, sizes, cut = [], [], [], [], [], []
     left_out = {"ground": 0, "ignored": 0, "impure": 0, "small": 0}
     for s, path in enumerate(scans):
@@ -154,7 +154,7 @@ def objects_from_labelled_scans(
                     continue
                 if n_named[g] == 0:
                     left_out["ignored"] += 1
-                elif _key(major[g]) in ground:
+                elif class_key(major[g]) in ground:
                     left_out["ground"] += 1
                 elif share[g] < min_purity:
                     left_out["impure"] += 1

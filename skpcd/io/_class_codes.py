@@ -8,7 +8,13 @@ user codes from 64 otherwise.
 
 import re
 
-__all__ = ["ASPRS_CODES", "ASPRS_NAMES", "SKPCD_USER_CODES", "classification_codes"]
+__all__ = [
+    "ASPRS_CODES",
+    "ASPRS_NAMES",
+    "SKPCD_USER_CODES",
+    "class_key",
+    "classification_codes",
+]
 
 #: ASPRS standard classes (LAS 1.4 R15, point formats 6 to 10) by name
 ASPRS_NAMES = {
@@ -92,7 +98,7 @@ SKPCD_USER_CODES = {
 _FIRST_FREE = 64 + len(SKPCD_USER_CODES)
 
 
-def _key(name):
+def class_key(name):
     """A class name as looked up: lower case, words joined by ``_``."""
     return re.sub(r"[\s\-]+", "_", str(name).strip().lower())
 
@@ -134,7 +140,7 @@ def classification_codes(class_names, codes=None):
     >>> classification_codes(["building", "car", "kiosk", "tree", "wire"])
     [6, 64, 76, 5, 14]
     """
-    given = {_key(k): v for k, v in (codes or {}).items()}
+    given = {class_key(k): v for k, v in (codes or {}).items()}
     for name, code in given.items():
         if not isinstance(code, int) or not 0 <= code <= 255:
             raise ValueError(f"the code of class {name!r} must be 0 to 255, got {code}")
@@ -143,7 +149,7 @@ def classification_codes(class_names, codes=None):
     out, new = [], {}
     free = _FIRST_FREE
     for name in class_names:
-        key = _key(name)
+        key = class_key(name)
         if key in fixed:
             out.append(fixed[key])
             continue
