@@ -8,6 +8,7 @@ import importlib
 
 _PUBLIC = {
     "SUPPORTED_EXTENSIONS": "skpcd.io._api",
+    "ClassMap": "skpcd.io._point_labels",
     "LasExtent": "skpcd.io._las",
     "PointLabels": "skpcd.io._point_labels",
     "iter_points": "skpcd.io._las",

@@ -33,6 +33,7 @@ from skpcd.io._las_reader import read_vlr_records
 __all__ = [
     "IGNORE",
     "SEMANTICKITTI_NAMES",
+    "ClassMap",
     "PointLabels",
     "labelled_scan_paths",
     "read_class_map",
@@ -134,8 +135,19 @@ class PointLabels(typing.NamedTuple):
 
 
 class ClassMap(typing.NamedTuple):
-    """A class map read by :func:`read_class_map`: new names by code and by
-    name, and where it came from (a path, or a built-in map's name)."""
+    """What :func:`read_class_map` returns (a named tuple).
+
+    Attributes
+    ----------
+    by_code : dict of int to str
+        The class each code becomes (``"ignore"``: left out).
+    by_name : dict of str to str
+        The class each class name becomes, for codes the map does not name
+        (their name from the file's legend) and for the names of a
+        prediction.
+    source : str
+        The file the map was read from, or the built-in map's name.
+    """
 
     by_code: dict
     by_name: dict
@@ -145,12 +157,9 @@ class ClassMap(typing.NamedTuple):
         """The name of each code: the map's, else the map's name of its
         default name, else the default name."""
         out = {}
-        for code in codes:
-            name = default.get(int(code), str(int(code)))
-            if int(code) in self.by_code:
-                out[int(code)] = self.by_code[int(code)]
-            else:
-                out[int(code)] = self.by_name.get(name, name)
+        for code in map(int, codes):
+            name = default.get(code, str(code))
+            out[code] = self.by_code.get(code, self.by_name.get(name, name))
         return out
 
 
