@@ -12,7 +12,12 @@ import pytest
 
 from skpcd.cli import main
 from skpcd.datasets import objects_from_labelled_scans
-from skpcd.io import read_point_labels, read_predicted_labels, write_point_cloud
+from skpcd.io import (
+    read_point_cloud,
+    read_point_labels,
+    read_predicted_labels,
+    write_point_cloud,
+)
 
 laspy = pytest.importorskip("laspy")
 
@@ -76,24 +81,17 @@ def test_fit_says_what_it_cut(real_labelled, tmp_path, capsys):
     assert "left out" in out and (tmp_path / "m.skpcd").is_file()
 
 
+def _score_semantic(folder, out, *extra):
+    """``skpcd score-scan`` of the labelled sweep against its ``semantic``
+    dimension, through the street map; the command's status."""
+    argv = ["score-scan", str(out), "--truth", "semantic", "--map"]
+    return main([*argv, str(folder / "map.csv"), *map(str, extra)])
+
+
 def test_identify_then_score_scan(fitted, capsys):
     folder, _, out, test = fitted
     report = folder / "report.json"
-    assert (
-        main(
-            [
-                "score-scan",
-                str(out),
-                "--truth",
-                "semantic",
-                "--map",
-                str(folder / "map.csv"),
-                "-o",
-                str(report),
-            ]
-        )
-        == 0
-    )
+    assert _score_semantic(folder, out, "-o", report) == 0
     text = capsys.readouterr().out
     assert "mIoU" in text and "confusion matrix, share of each true class" in text
     numbers = json.loads(report.read_text())
@@ -106,22 +104,26 @@ def test_identify_then_score_scan(fitted, capsys):
     assert pooled["iou"]["ground"] > 0.8 and pooled["iou"]["car"] > 0.15
     assert pooled["miou"] == pytest.approx(np.mean(list(pooled["iou"].values())))
     # the same through the CSV report
-    main(
-        [
-            "score-scan",
-            str(out),
-            "--truth",
-            "semantic",
-            "--map",
-            str(folder / "map.csv"),
-            "-o",
-            str(folder / "r.csv"),
-            "--quiet",
-        ]
-    )
+    assert _score_semantic(folder, out, "-o", folder / "r.csv", "--quiet") == 0
     rows = list(csv.DictReader(open(folder / "r.csv")))
     car = next(r for r in rows if r["class"] == "car" and r["scan"] != "(pooled)")
     assert float(car["iou"]) == pytest.approx(pooled["iou"]["car"], abs=1e-6)
+
+
+def test_several_scans_are_pooled(fitted, tmp_path, capsys):
+    """Two scans: one line each, and scores over all their points (here the
+    same scan twice: the IoU of one, twice the points)."""
+    folder, _, out, _ = fitted
+    copy = tmp_path / "copy.laz"
+    copy.write_bytes(out.read_bytes())
+    report = tmp_path / "two.json"
+    argv = ["score-scan", str(out), str(copy), "--truth", "semantic", "--map"]
+    assert main([*argv, str(folder / "map.csv"), "-o", str(report), "--quiet"]) == 0
+    numbers = json.loads(report.read_text())
+    one, two = numbers["scans"]
+    assert one["iou"] == two["iou"] == numbers["pooled"]["iou"]
+    assert numbers["pooled"]["n_points"] == 2 * one["n_points"]
+    assert numbers["pooled"]["confusion"] == (2 * np.array(one["confusion"])).tolist()
 
 
 def test_round_trip_scores_one(fitted, capsys):
@@ -130,11 +132,11 @@ def test_round_trip_scores_one(fitted, capsys):
     folder, _, out, _ = fitted
     pred = read_predicted_labels(out)
     names, codes = np.unique(pred, return_inverse=True)
-    points = np.column_stack([laspy.read(out).x, laspy.read(out).y, laspy.read(out).z])
+    points = read_point_cloud(out)
     truth = folder / "own.ply"
     write_point_cloud(truth, points, fields={"label": codes.astype(np.int32)})
     (folder / "own.csv").write_text("".join(f"{k},{n}\n" for k, n in enumerate(names)))
-    main(
+    status = main(
         [
             "score-scan",
             str(out),
@@ -148,6 +150,7 @@ def test_round_trip_scores_one(fitted, capsys):
             str(folder / "own.json"),
         ]
     )
+    assert status == 0
     pooled = json.loads((folder / "own.json").read_text())["pooled"]
     assert set(pooled["classes"]) == set(names) and len(names) >= 4
     assert all(v == 1.0 for v in pooled["iou"].values()) and pooled["accuracy"] == 1
