@@ -119,7 +119,7 @@ def read_point_cloud(path, *, fields=None, nonfinite="drop"):
     path : str or path-like
         The file. Its extension selects the format: ``.xyz``, ``.txt``,
         ``.pts``, ``.csv`` (text), ``.npy``, ``.ply`` (ascii, binary little or
-        big endian), ``.pcd`` (ascii, binary, binary_compressed) and
+        big endian), ``.pcd`` (ascii, binary, binary_compressed),
         ``.las``/``.laz`` (through laspy and lazrs) and ``.bin`` (KITTI
         Velodyne: float32 x, y, z, remission, read as ``intensity``).
     fields : None, "all" or list of str, default=None

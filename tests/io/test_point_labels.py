@@ -177,6 +177,19 @@ def test_semantickitti_bin_and_label_real(tmp_path, real_labelled):
     assert points.shape == truth[0][0].shape and extras["intensity"].max() <= 1
 
 
+def test_kitti_bin_round_trip(tmp_path):
+    """x, y, z and intensity as float32 records; nothing else fits."""
+    xyz = np.array([[1.5, -2.25, 0.125], [3.0, 4.0, -1.75]])
+    write_point_cloud(tmp_path / "s.bin", xyz, fields={"intensity": [0.5, 0.25]})
+    assert (tmp_path / "s.bin").stat().st_size == 32
+    points, extras = read_point_cloud(tmp_path / "s.bin", fields=["intensity"])
+    np.testing.assert_array_equal(points, xyz)
+    np.testing.assert_array_equal(extras["intensity"], [0.5, 0.25])
+    with pytest.raises(ValueError, match="holds x, y, z and intensity only"):
+        write_point_cloud(tmp_path / "t.bin", xyz, fields={"label": [1, 2]})
+    assert not (tmp_path / "t.bin").exists()
+
+
 def test_label_length_must_match_its_scan(tmp_path):
     np.zeros((5, 4), "<f4").tofile(tmp_path / "a.bin")
     np.zeros(4, "<u4").tofile(tmp_path / "a.label")
