@@ -69,7 +69,8 @@ def _ground(args, points, result):
 
 def write_inventory_of(args, out, geometries, pred, score, points, result):
     """Write the inventory of the identified segments to ``out``."""
-    from skpcd.io._inventory import read_las_crs, write_inventory
+    from skpcd.io._crs import read_las_crs
+    from skpcd.io._inventory import write_inventory
     from skpcd.segmentation._inventory import object_inventory
 
     table = object_inventory(

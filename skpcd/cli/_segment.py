@@ -80,7 +80,22 @@ def add_segmentation_options(p):
         help="dbscan: AutoEpsDBSCAN, eps from the data unless --eps; euclidean: "
         "EuclideanClusters, eps 0.2 unless --eps (default dbscan)",
     )
-    p.add_argument("--eps", type=float, default=None, help="clustering radius (m)")
+    p.add_argument(
+        "--eps",
+        type=float,
+        default=None,
+        help="clustering radius, in the units of the coordinates",
+    )
+    p.add_argument(
+        "--unit",
+        type=unit_length,
+        default="auto",
+        metavar="METRES|auto",
+        help="length of a coordinate unit in metres (0.3048 for feet): the "
+        "defaults are in metres and a scan in other units is segmented in "
+        "metres; auto: the unit of a LAS/LAZ file's CRS, else metres "
+        "(default auto)",
+    )
     p.add_argument(
         "--eps-scale",
         type=float,
@@ -106,7 +121,8 @@ def add_segmentation_options(p):
         "--tile-size",
         type=float,
         default=None,
-        help="process the scene in square tiles of this side (metres), streaming "
+        help="process the scene in square tiles of this side (in the units of "
+        "the coordinates), streaming "
         "LAS/LAZ input, so that memory is bounded by the tile, not the scene; "
         "same ground and segments as without, except with the structures step "
         "(facades, wires, trunk splitting), whose segments agree up to a "
@@ -116,12 +132,31 @@ def add_segmentation_options(p):
         "--tile-buffer",
         type=float,
         default=None,
-        help="overlap around each tile (m); default: the smallest that keeps "
+        help="overlap around each tile (units of the coordinates); default: "
+        "the smallest that keeps "
         "the result exact (see segment_scene)",
     )
     add_n_jobs(p)
     add_output_options(p)
     add_scheduler(p)
+
+
+def unit_length(text):
+    """The value of ``--unit``: "auto" or a length in metres, over 0."""
+    import argparse
+
+    if text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(
+            f"expected auto or a length in metres over 0 (0.3048 for feet), "
+            f"got {text!r}"
+        )
+    return value
 
 
 def ground_codes(text):
@@ -217,6 +252,7 @@ def segment_file(args, command, fields=None):
     from skpcd.utils._progress import stage
 
     tiled = args.tile_size is not None
+    unit = _unit_of(args)
     finite = None
     ground = None if args.ground == "none" else args.ground
     if ground == "from-file":
@@ -253,6 +289,7 @@ def segment_file(args, command, fields=None):
             random_state=args.random_state,
             n_jobs=args.n_jobs,
             structures=args.structures,
+            unit=unit.metres,
             **tiling,
         )
     except ValueError as exc:
@@ -262,6 +299,12 @@ def segment_file(args, command, fields=None):
         ground = np.zeros(len(points), dtype=bool)
         labels[finite], ground[finite] = result.labels, result.ground
         result = result._replace(labels=labels, ground=ground)
+    if unit.metres != 1.0 and not args.quiet:
+        print(
+            f"skpcd {command}: coordinates in {unit.name} ({unit.metres:.6g} m, "
+            f"{unit.source}): segmented in metres (--unit to choose)",
+            file=sys.stderr,
+        )
     if result.scan is not None and not args.quiet:
         print(
             f"skpcd {command}: {result.scan.summary()}: "
@@ -275,7 +318,9 @@ def segment_file(args, command, fields=None):
             f"{int(result.ground.sum())} ground"
         )
         print(
-            f"segments  {result.n_segments} ({args.method}, eps {result.eps:.3f}); "
+            f"segments  {result.n_segments} ({args.method}, eps {result.eps:.3f}"
+            + (f" = {result.eps * result.unit:.3f} m" if result.unit != 1.0 else "")
+            + "); "
             f"{int(((labels < 0) & ~result.ground).sum())} points in none "
             f"({time.perf_counter() - start:.1f} s)"
         )
@@ -286,6 +331,17 @@ def segment_file(args, command, fields=None):
                 + ", ".join(f"{int((kinds == k).sum())} {k}" for k in KINDS)
             )
     return points, extras, result
+
+
+def _unit_of(args):
+    """The unit of the coordinates: ``--unit``, or with auto the unit of
+    a LAS/LAZ scene's CRS (a :class:`~skpcd.io.LinearUnit`)."""
+    from skpcd.io import LinearUnit, linear_unit
+
+    if args.unit != "auto":
+        return LinearUnit("unit", float(args.unit), "--unit")
+    found = linear_unit(args.scene) if _is_las(args.scene) else None
+    return found if found is not None else LinearUnit("metre", 1.0, "default")
 
 
 def _segments(args, points, extras, result, folder, *, fields=True):
@@ -326,6 +382,7 @@ def _metadata(args, result):
         "method": args.method,
         "eps": result.eps,
         "eps_given": args.eps is not None,
+        "unit_metres": result.unit,
         "structures": bool(args.structures),
         "min_size": args.min_size,
         "max_size": args.max_size,

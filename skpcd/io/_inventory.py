@@ -4,7 +4,7 @@ or a CSV table, in the coordinate reference system of the scan.
 The inventory's columns are those of
 :func:`skpcd.segmentation._inventory.object_inventory`; each row is a 3-D
 point at the base of an object. The CRS is read from the scan's LAS VLRs
-(:func:`read_las_crs`).
+(:func:`skpcd.io.read_las_crs`).
 """
 
 import csv
@@ -18,12 +18,10 @@ import numpy as np
 
 from skpcd.exceptions import PointCloudFileError
 from skpcd.io._atomic import atomic_path
-from skpcd.io._las_reader import read_vlr_records
 
 __all__ = [
     "INVENTORY_FORMATS",
     "check_inventory_path",
-    "read_las_crs",
     "write_inventory",
 ]
 
@@ -34,61 +32,6 @@ INVENTORY_FORMATS = {
     ".json": "geojson",
     ".csv": "csv",
 }
-
-# GeoTIFF keys of the GeoKeyDirectory VLR that name a CRS by its EPSG code
-_PROJECTED_KEY, _GEOGRAPHIC_KEY = 3072, 2048
-# "user-defined" in GeoTIFF: no EPSG code
-_USER_DEFINED = 32767
-
-
-def _crs_from_geokeys(data):
-    """``EPSG:code`` from a GeoKeyDirectory record, or None."""
-    if len(data) < 8:
-        return None
-    values = struct.unpack(f"<{len(data) // 2}H", data[: len(data) // 2 * 2])
-    n_keys = values[3]
-    found = {}
-    for i in range(n_keys):
-        key = values[4 + 4 * i : 8 + 4 * i]
-        if len(key) < 4:
-            break
-        key_id, location, _, value = key
-        if location == 0:
-            found[key_id] = value
-    for key_id in (_PROJECTED_KEY, _GEOGRAPHIC_KEY):
-        code = found.get(key_id)
-        if code and code != _USER_DEFINED:
-            return f"EPSG:{code}"
-    return None
-
-
-def read_las_crs(path):
-    """The coordinate reference system of a LAS/LAZ file, from its VLRs.
-
-    Parameters
-    ----------
-    path : str or path-like
-        A LAS or LAZ file.
-
-    Returns
-    -------
-    crs : str or None
-        The OGC WKT of the "OGC Coordinate System WKT" record
-        (``LASF_Projection`` 2112) if the file has one, else ``EPSG:code``
-        from the GeoTIFF keys (``LASF_Projection`` 34735: the projected,
-        else the geographic CRS), else None.
-    """
-    records = {
-        (user.rstrip("\0"), record): data
-        for user, record, data in read_vlr_records(path)
-    }
-    wkt = records.get(("LASF_Projection", 2112))
-    if wkt:
-        text = wkt.split(b"\0", 1)[0].decode("utf-8", "replace").strip()
-        if text:
-            return text
-    keys = records.get(("LASF_Projection", 34735))
-    return _crs_from_geokeys(keys) if keys else None
 
 
 def _is_wgs84(crs):
@@ -236,7 +179,7 @@ def write_inventory(path, inventory, *, crs=None, overwrite=False):
         :func:`~skpcd.segmentation._inventory.object_inventory` returns).
     crs : str, default=None
         The coordinate reference system of the coordinates (``EPSG:code``
-        or WKT; see :func:`read_las_crs`), written where the format holds
+        or WKT; see :func:`~skpcd.io.read_las_crs`), written where the format holds
         one. GeoJSON (RFC 7946) assumes WGS 84 longitude, latitude: a
         projected CRS is written in the ``crs`` member of GeoJSON 2008,
         which GDAL and QGIS read.

@@ -8,6 +8,7 @@ import re
 import numpy as np
 
 from skpcd.io._class_codes import ASPRS_NAMES
+from skpcd.io._crs import GEOGRAPHIC_KEY, PROJECTED_KEY, USER_DEFINED
 from skpcd.io._las_reader import read_las_header
 
 __all__ = ["describe_las"]
@@ -15,8 +16,6 @@ __all__ = ["describe_las"]
 _GEO_KEYS = ("LASF_Projection", 34735)
 _GEO_ASCII = ("LASF_Projection", 34737)
 _WKT = ("LASF_Projection", 2112)
-_PROJECTED_KEY, _GEOGRAPHIC_KEY = 3072, 2048
-_USER_DEFINED = 32767
 _LOOKUP = ("LASF_Spec", 0)
 
 
@@ -42,8 +41,8 @@ def _crs_from_vlrs(header):
             ascii_text = "".join(getattr(vlr, "strings", ())).strip("|\0 ") or None
     if not keys:
         return None
-    code = keys.get(_PROJECTED_KEY, keys.get(_GEOGRAPHIC_KEY))
-    epsg = code if code not in (None, 0, _USER_DEFINED) else None
+    code = keys.get(PROJECTED_KEY, keys.get(GEOGRAPHIC_KEY))
+    epsg = code if code not in (None, 0, USER_DEFINED) else None
     name = ascii_text or (f"EPSG:{epsg}" if epsg else None)
     return {"name": name, "epsg": epsg, "wkt": None, "from": "GeoKeys VLR"}
 

@@ -15,7 +15,7 @@ from sklearn.utils._param_validation import (
 )
 
 from skpcd.exceptions import SegmentationWarning
-from skpcd.io import iter_points, read_las_extent, read_point_cloud
+from skpcd.io import iter_points, linear_unit, read_las_extent, read_point_cloud
 from skpcd.preprocessing import (
     RadiusOutlierFilter,
     StatisticalOutlierFilter,
@@ -71,6 +71,9 @@ class SceneSegmentation(typing.NamedTuple):
         The ground preset used (a key of ``GROUND_PRESETS``, or "from-file"
         for a classification read from the file), None for a filter or
         flags of your own or none.
+    unit : float
+        The length of one coordinate unit in metres (``unit`` of
+        :func:`segment_scene`, resolved): 0.3048 for a scan in feet.
     """
 
     labels: np.ndarray
@@ -79,6 +82,7 @@ class SceneSegmentation(typing.NamedTuple):
     kinds: np.ndarray | None = None
     scan: typing.Any = None
     ground_filter: str | None = None
+    unit: float = 1.0
 
     @property
     def n_segments(self):
@@ -114,6 +118,7 @@ class SceneSegmentation(typing.NamedTuple):
             None,
         ],
         "structures": ["boolean", dict],
+        "unit": [StrOptions({"auto"}), Interval(Real, 0, None, closed="neither")],
     },
     prefer_skip_nested_validation=True,
 )
@@ -136,6 +141,7 @@ def segment_scene(
     temp_folder=None,
     denoise=None,
     structures=True,
+    unit="auto",
 ):
     """Cut a LiDAR scene into object segments.
 
@@ -236,10 +242,12 @@ def segment_scene(
         that of its bases pass, 12.6 m; CSF needs none), at least ``2 *
         eps``, and with ``structures`` at least ``max(10, 8 * eps)`` metres
         (the points the structures step sees around a tile; with
-        ``eps=None``, 10 m, and a ValueError if the estimated eps needs
-        more); with ``eps=None``, no SMRF and no structures, a quarter of
-        the tile. Tiles should be several times larger than their buffer,
-        or the overlap dominates the work.
+        ``eps=None``, 10 m, and the scan is cut again with a larger buffer
+        if the estimated eps needs more); with ``eps=None``, no SMRF and no
+        structures, a quarter of the tile. A buffer given that the
+        estimated eps needs more than is a ValueError. Tiles should be
+        several times larger than their buffer, or the overlap dominates
+        the work.
     temp_folder : str or path-like, default=None
         Where the tile files and the result arrays are spilled with
         ``tile_size`` (the system's temporary folder when None); it needs
@@ -267,6 +275,17 @@ def segment_scene(
         split; ``n_neighbors`` (12), the neighbours of the local shape.
         False clusters every non-ground point alike (the earlier pipeline).
         Not with ``tile_size`` (a ValueError).
+    unit : "auto" or float, default="auto"
+        The length of one coordinate unit in metres: every default length
+        (the ground presets, the structures, the largest automatic radius
+        of a sweep) is in metres, and a scan in other units is segmented
+        in metres (its coordinates scaled by ``unit``; the result's labels
+        are those of the points as given). ``eps``, ``tile_size``,
+        ``tile_buffer``, ``sensor`` and the result's ``eps`` are in the
+        units of the coordinates. "auto": the unit of a LAS/LAZ file's CRS
+        (:func:`skpcd.io.linear_unit`: 0.3048 for international feet, as
+        PDAL's and laspy's ``autzen`` files), else 1 (metres), as for an
+        array.
 
     Returns
     -------
@@ -376,6 +395,12 @@ def segment_scene(
     ['object', 'object']
     """
     _check_options(denoise, tile_size, structures)
+    unit = resolve_unit(unit, points)
+    if unit != 1.0:  # every length given in metres, as the defaults
+        eps = None if eps is None else eps * unit
+        sensor = None if sensor is None else np.asarray(sensor, dtype=float) * unit
+        tile_size = None if tile_size is None else tile_size * unit
+        tile_buffer = None if tile_buffer is None else tile_buffer * unit
     clustering = {
         "method": method, "eps": eps, "eps_scale": eps_scale,
         "min_samples": min_samples, "min_cluster_size": min_cluster_size,
@@ -383,10 +408,11 @@ def segment_scene(
         "n_jobs": n_jobs,
     }  # fmt: skip
     if tile_size is not None:
-        return _segment_in_tiles(
-            points, ground, sensor, structures, (tile_size, tile_buffer, temp_folder),
-            clustering,
+        seg = _segment_in_tiles(
+            points, ground, sensor, structures,
+            (tile_size, tile_buffer, temp_folder, unit), clustering,
         )  # fmt: skip
+        return seg._replace(eps=seg.eps / unit, unit=unit)
     from_file = classified_ground(ground, points)
     given = None
     if from_file is not None:
@@ -394,6 +420,8 @@ def segment_scene(
     elif isinstance(points, (str, os.PathLike)):
         points = read_point_cloud(points)
     xyz = check_scene(points)
+    if unit != 1.0:
+        xyz = xyz * unit
     if from_file is None:
         given = ground_flags(ground, len(xyz))
     keep = None
@@ -423,7 +451,12 @@ def segment_scene(
         xyz, is_ground, **{**clustering, "eps": eps}, structures=structures,
         sweep=sweep,
     )  # fmt: skip
-    seg = seg._replace(scan=scan, ground_filter=_ground_name(ground, from_file))
+    seg = seg._replace(
+        eps=seg.eps / unit,
+        scan=scan,
+        ground_filter=_ground_name(ground, from_file),
+        unit=unit,
+    )
     if keep is None:
         return seg
     labels = np.full(full, -1, dtype=np.int64)
@@ -450,9 +483,9 @@ def _check_options(denoise, tile_size, structures):
 
 
 def _segment_in_tiles(points, ground, sensor, structures, tiling, clustering):
-    """segment_scene with ``tiling = (tile_size, tile_buffer, temp_folder)``
-    (see its Notes)."""
-    tile_size, tile_buffer, temp = tiling
+    """segment_scene with ``tiling = (tile_size, tile_buffer, temp_folder,
+    unit)`` (see its Notes; lengths in metres)."""
+    tile_size, tile_buffer, temp, unit = tiling
     scan = None
     from_file = classified_ground(ground, points)
     given = None
@@ -465,7 +498,7 @@ def _segment_in_tiles(points, ground, sensor, structures, tiling, clustering):
             for start in range(0, len(flags), _GIVEN_CHUNK)
         )
     if isinstance(ground, str) and ground == "auto":
-        sample = _scan_sample(points, clustering["random_state"])
+        sample = _scan_sample(points, clustering["random_state"]) * unit
         scan = describe_scan(
             sample, sensor=sensor, random_state=clustering["random_state"]
         )
@@ -489,6 +522,7 @@ def _segment_in_tiles(points, ground, sensor, structures, tiling, clustering):
         structures=params,
         **{**clustering, "eps": None if eps is None else float(eps)},
         temp_folder=temp,
+        unit=unit,
     )
     return SceneSegmentation(
         labels, is_ground, used, _kind_names(kinds), scan,
@@ -499,6 +533,20 @@ def _segment_in_tiles(points, ground, sensor, structures, tiling, clustering):
 # Ground flags given (a classification, an array) go to the tiles in
 # chunks of this many points.
 _GIVEN_CHUNK = 1_000_000
+
+
+def resolve_unit(unit, points):
+    """The length of a coordinate unit in metres: ``unit`` itself, or
+    with "auto" the unit of a LAS/LAZ file's CRS (1 for anything else)."""
+    if unit != "auto":
+        return float(unit)
+    if isinstance(points, (str, os.PathLike)) and str(points).lower().endswith(
+        (".las", ".laz")
+    ):
+        found = linear_unit(points)
+        if found is not None:
+            return float(found.metres)
+    return 1.0
 
 
 def _ground_name(ground, from_file):

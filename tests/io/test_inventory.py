@@ -14,7 +14,8 @@ import pytest
 
 from skpcd.cli import main
 from skpcd.exceptions import PointCloudFileError
-from skpcd.io._inventory import check_inventory_path, read_las_crs, write_inventory
+from skpcd.io._crs import read_las_crs
+from skpcd.io._inventory import check_inventory_path, write_inventory
 from skpcd.segmentation._inventory import (
     INVENTORY_COLUMNS,
     GroundHeight,

@@ -7,6 +7,7 @@ clusters) are mapped over them (:mod:`skpcd.segmentation.tiling._dispatch`);
 see its docstring for why the tiled answer is the untiled one.
 """
 
+import math
 import shutil
 import tempfile
 from pathlib import Path
@@ -682,6 +683,7 @@ def segment_tiled(
     eps_scale,
     chunk_size=1_000_000,
     temp_folder=None,
+    unit=1.0,
 ):
     """The tiled path of :func:`~skpcd.segmentation.segment_scene`.
 
@@ -690,7 +692,9 @@ def segment_tiled(
     points in file order, as consecutive boolean chunks of any length (a
     classification read from the file, flags given); ``structures`` None
     or the parameters of the structures step (the defaults merged); the
-    other arguments are those of ``segment_scene``, validated. Returns
+    other arguments are those of ``segment_scene``, validated, their
+    lengths in metres: the coordinates are read multiplied by ``unit``
+    (a message gives lengths in the units of the coordinates). Returns
     ``(labels, ground, eps, kinds)``: the first two as memory-mapped arrays
     (file already unlinked on POSIX systems), the kind of each segment (an
     index of ``KINDS``).
@@ -708,13 +712,15 @@ def segment_tiled(
     ground_buffer = max(0.0, min(reach, buffer - margin))
     if eps is not None and structures is not None and structures_reach(eps) > buffer:
         raise ValueError(
-            f"tile_buffer={buffer:g} is too small for the structures step: it "
-            f"needs at least {structures_reach(eps):g} around each tile"
+            f"tile_buffer={buffer / unit:g} is too small for the structures "
+            f"step: it needs at least {structures_reach(eps) / unit:g} around "
+            "each tile"
         )
     if eps is not None and 2 * eps > buffer:
         raise ValueError(
-            f"tile_buffer={buffer:g} is too small for eps={eps:g}: the stitching "
-            f"of segments across tiles needs at least 2 * eps = {2 * eps:g}"
+            f"tile_buffer={buffer / unit:g} is too small for eps={eps / unit:g}: "
+            "the stitching of segments across tiles needs at least 2 * eps = "
+            f"{2 * eps / unit:g}"
         )
     # the C heap keeps what was freed (a sample of the scan read to tell its
     # kind, the spill's chunks) unless told to give it back: the tiles'
@@ -722,7 +728,7 @@ def segment_tiled(
     release_free_memory()
     scene = tile_scene(
         source, tile_size, buffer=buffer, chunk_size=chunk_size,
-        temp_folder=temp_folder,
+        temp_folder=temp_folder, unit=unit,
     )  # fmt: skip
     release_free_memory()
     out = Path(tempfile.mkdtemp(prefix="skpcd_labels_", dir=temp_folder))
@@ -763,12 +769,25 @@ def segment_tiled(
                 random_state, n_jobs, chunk_size,
             )  # fmt: skip
             least = 2 * eps if structures is None else structures_reach(eps)
-            if least > buffer:
+            if least > buffer and tile_buffer is not None:
+                room = buffer / 2 if structures is None else buffer / 8
                 raise ValueError(
-                    f"the estimated eps={eps:g} needs a tile buffer of at least "
-                    f"{least:g}, more than tile_buffer={buffer:g}; pass a larger "
-                    "tile_buffer or give eps"
+                    f"the estimated eps={eps / unit:.6g} needs a tile buffer of "
+                    f"at least {least / unit:g}, more than tile_buffer="
+                    f"{buffer / unit:g}; pass tile_buffer="
+                    f"{math.ceil(least * 1.01 / unit)} or more, or "
+                    f"eps={room / unit:.4g} or less"
                 )
+            if least > buffer:  # the default buffer: cut again with enough
+                buffer = 1.01 * least + 1e-6
+                scene.close()
+                release_free_memory()
+                scene = tile_scene(
+                    source, tile_size, buffer=buffer, chunk_size=chunk_size,
+                    temp_folder=temp_folder, unit=unit,
+                )  # fmt: skip
+                grid = scene.grid
+                tiles = np.flatnonzero(scene.owned_counts())
 
         # 3. clusters: each tile's DBSCAN on its non-ground points within
         # 2 * eps of its core square (with structures: its segmentation of

@@ -78,6 +78,7 @@ def tile_scene(
     buffer=0.0,
     chunk_size=1_000_000,
     temp_folder=None,
+    unit=1.0,
     _bounds=None,
 ):
     """Cut a scene into buffered square tiles spilled to temporary files.
@@ -105,6 +106,11 @@ def tile_scene(
         Where to create the temporary folder of tile files (the system's
         temporary folder when None). It needs room for the points of all
         buffered tiles: 32 bytes per point and tile.
+    unit : float, default=1.0
+        The coordinates are multiplied by this as they are read (the
+        length of a coordinate unit in metres, to tile a scan in feet in
+        metres); ``tile_size`` and ``buffer`` are in the scaled units. A
+        COPC file is then spilled as any LAZ file.
 
     Returns
     -------
@@ -126,9 +132,12 @@ def tile_scene(
     True True
     """
     chunk_size = check_chunk_size(chunk_size)
-    if _bounds is None and is_path(source) and is_copc(source):
+    if _bounds is None and unit == 1.0 and is_path(source) and is_copc(source):
         return octree_scene(source, tile_size, buffer=buffer, temp_folder=temp_folder)
-    mins, maxs = scene_bounds(source, chunk_size) if _bounds is None else _bounds
+    if _bounds is None:
+        mins, maxs = (np.asarray(b) * unit for b in scene_bounds(source, chunk_size))
+    else:
+        mins, maxs = _bounds
     if not np.all(mins <= maxs):
         raise ValueError("the scene has no points")
     grid = TileGrid.cover(mins, maxs, tile_size, buffer)
@@ -141,6 +150,8 @@ def tile_scene(
         for xyz in iter_chunks(source, chunk_size):
             if not len(xyz):
                 continue
+            if unit != 1.0:
+                xyz = xyz * unit
             if not np.all(np.isfinite(xyz)):
                 raise ValueError("the scene has NaN or infinite coordinates")
             lo_c, hi_c = point_bounds(xyz)
@@ -173,7 +184,7 @@ def tile_scene(
         shutil.rmtree(folder, ignore_errors=True)
         return tile_scene(
             source, tile_size, buffer=buffer, chunk_size=chunk_size,
-            temp_folder=temp_folder, _bounds=(lo, hi),
+            temp_folder=temp_folder, unit=unit, _bounds=(lo, hi),
         )  # fmt: skip
     return TiledScene(grid, folder, start, lo, hi, counts, owned)
 
