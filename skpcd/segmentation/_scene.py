@@ -449,7 +449,7 @@ def segment_scene(
         eps, sweep = _radius_of_kind(xyz, is_ground, scan, clustering)
     seg = _cluster_rest(
         xyz, is_ground, **{**clustering, "eps": eps}, structures=structures,
-        sweep=sweep,
+        sweep=sweep, unit=unit,
     )  # fmt: skip
     seg = seg._replace(
         eps=seg.eps / unit,
@@ -684,10 +684,12 @@ def _largest_box(xyz, labels):
 
 def _cluster_rest(
     xyz, is_ground, *, method, eps, eps_scale, min_samples, min_cluster_size,
-    max_cluster_size, random_state, n_jobs, structures, sweep=None,
+    max_cluster_size, random_state, n_jobs, structures, sweep=None, unit=1.0,
 ):  # fmt: skip
     """The segments of the non-ground points, with the check of an
-    automatic eps (see segment_scene)."""
+    automatic eps (see segment_scene); its warning gives lengths in the
+    units of the coordinates (``xyz`` is in metres, ``unit`` metres a
+    unit)."""
 
     kw = {
         "method": method, "eps_scale": eps_scale, "min_samples": min_samples,
@@ -716,10 +718,11 @@ def _cluster_rest(
             break
         seg = _segment_rest(xyz, is_ground, eps=smaller, **kw)
     if seg.eps != first:
+        first, merged, extent = first / unit, merged / unit, extent / unit
         warnings.warn(
             f"the automatic eps {first:.3g} joined a segment of {merged[0]:.4g} x "
             f"{merged[1]:.4g} in a scene of {extent[0]:.4g} x "
-            f"{extent[1]:.4g}: eps {seg.eps:.3g} used instead; set eps "
+            f"{extent[1]:.4g}: eps {seg.eps / unit:.3g} used instead; set eps "
             "(--eps) to choose the radius",
             SegmentationWarning,
             stacklevel=3,
