@@ -440,6 +440,33 @@ def run_segment(args):
     return 0
 
 
+def write_legend(path, classes, seg_class, seg_sizes, n_points, *, las, into):
+    """identify's ``OUTPUT.classes.csv``: a row per class with its index
+    (the ``class`` field of a PLY, PCD or text output), the code of the
+    ``class`` extra dimension of a LAS/LAZ output (64 + index), the code its
+    ``classification`` holds (ASPRS or user code; blank when the output
+    has no classification of classes), the name, the segments and points."""
+    from skpcd.io._class_codes import classification_codes
+
+    names = [str(c) for c in classes]
+    in_classification = las and into == "classification"
+    codes = classification_codes(names) if in_classification else [""] * len(names)
+    with open(path, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(
+            ["class", "class_code", "classification", "name", "n_segments", "n_points"]
+        )
+        outside = n_points - int(seg_sizes.sum())
+        writer.writerow(
+            [-1, 0, 1 if in_classification else "", "(no segment)", 0, outside]
+        )
+        for j, name in enumerate(names):
+            mine = seg_class == j
+            writer.writerow(
+                [j, 64 + j, codes[j], name, int(mine.sum()), int(seg_sizes[mine].sum())]
+            )
+
+
 def _is_las(path):
     return Path(path).suffix.lower() in (".las", ".laz")
 
@@ -520,16 +547,10 @@ def run_identify(args):
             )
         except ValueError as exc:  # a field the format cannot hold, ...
             raise CommandError("identify", str(exc)) from exc
-        with open(legend_tmp, "w", newline="") as f:
-            writer = csv.writer(f)
-            writer.writerow(["class", "las_code", "name", "n_segments", "n_points"])
-            outside = n_points - int(seg_sizes.sum())
-            writer.writerow([-1, 0, "(no segment)", 0, outside])
-            for j, c in enumerate(classes):
-                mine = seg_class == j
-                writer.writerow(
-                    [j, 64 + j, c, int(mine.sum()), int(seg_sizes[mine].sum())]
-                )
+        write_legend(
+            legend_tmp, classes, seg_class, seg_sizes, n_points,
+            las=_is_las(out), into=args.classes_into,
+        )  # fmt: skip
         if inventory is not None:
             write_inventory_of(
                 args, inventory, geometries, pred, seg_score, points, result

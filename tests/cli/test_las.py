@@ -85,12 +85,26 @@ def test_identify_keeps_every_dimension_of_the_scan(tmp_path, models, pipeline):
     np.testing.assert_array_equal(las["original_classification"], source.classification)
     segment, code = np.asarray(las["segment"]), np.asarray(las["class"])
     assert segment.max() >= 5 and ((segment < 0) == (code == 0)).all()
-    names = read_class_names(out)
+    names = read_class_names(out)  # the codes of the class dimension
     legend = list(csv.DictReader(open(f"{out}.classes.csv")))
-    assert {int(r["las_code"]): r["name"] for r in legend if int(r["class"]) >= 0} == (
-        names
-    )
-    assert set(np.unique(code[segment >= 0])) <= set(names)
+    rows = [r for r in legend if int(r["class"]) >= 0]
+    # the side file names the codes of classification, as its lookup does,
+    # and apart those of the class dimension
+    assert {int(r["class_code"]): r["name"] for r in rows} == names
+    (table,) = [
+        v for v in las.vlrs if isinstance(v, laspy.vlrs.known.ClassificationLookupVlr)
+    ]
+    lookup = dict(table.lookups)
+    # (unknown is ASPRS 1, unclassified; the lookup names 1 and 2 as ASPRS)
+    assert {
+        int(r["classification"]): r["name"][:15] for r in rows if r["name"] != "unknown"
+    } == {c: lookup[c] for c in lookup if c not in (1, 2)}
+    by_code = {int(r["class_code"]): int(r["classification"]) for r in rows}
+    segmented = segment >= 0
+    assert [by_code[c] for c in code[segmented]] == las.classification[
+        segmented
+    ].tolist()
+    assert set(np.unique(code[segmented])) <= set(names)
     score = "similarity" if pipeline == "case-based" else "probability"
     assert np.isfinite(las[score][segment >= 0]).all()
     if pipeline == "case-based":  # trained on cars only: the rest is unknown
