@@ -91,8 +91,11 @@ def discard(entry):
     """
     path = entry["path"]
     if entry["kind"] == "file":
-        with contextlib.suppress(FileNotFoundError, NotADirectoryError):
-            os.unlink(path)
+        # only a file that exists: on a read-only file system unlinking a
+        # missing one fails with EROFS, not FileNotFoundError
+        if os.path.lexists(path):
+            with contextlib.suppress(FileNotFoundError, NotADirectoryError):
+                os.unlink(path)
         return
     old = entry.get("old")
     if old is not None and os.path.isdir(old):

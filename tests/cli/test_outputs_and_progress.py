@@ -95,6 +95,35 @@ def test_an_unwritable_output_is_refused_before_any_work(
     assert _leftovers(tmp_path) == []
 
 
+def test_an_output_on_a_read_only_file_system_is_named(
+    tmp_path, capsys, scene_file, monkeypatch
+):
+    # before: "error: .../ro/.skpcd-partial-2085-probe-segs: Read-only file
+    # system": the probe failed, then its removal failed too (on a read-only
+    # file system, unlinking a missing file is EROFS, not ENOENT)
+    scene = tmp_path / "scene.ply"
+    scene_file(scene)
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    real_open, real_unlink = os.open, os.unlink
+
+    def read_only(call):
+        def refused(path, *args, **kwargs):
+            if os.fspath(path).startswith(str(ro)):
+                raise OSError(errno.EROFS, os.strerror(errno.EROFS), os.fspath(path))
+            return call(path, *args, **kwargs)
+
+        return refused
+
+    monkeypatch.setattr(os, "open", read_only(real_open))
+    monkeypatch.setattr(os, "unlink", read_only(real_unlink))
+    out = ro / "segs"
+    assert main(["segment", str(scene), "-o", str(out), "--quiet"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{out}: Read-only file system" in err[0], err
+    assert PARTIAL_MARK not in err[0]
+
+
 def _leftovers(folder):
     return [p.name for p in folder.iterdir() if p.name.startswith(".")]
 
