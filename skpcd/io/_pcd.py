@@ -5,6 +5,10 @@ A text header (``VERSION``, ``FIELDS``, ``SIZE``, ``TYPE``, ``COUNT``,
 are comments) followed by the data in one of three encodings:
 
 - ``ascii``: one point per line, values apart by spaces, tabs or commas.
+  The coordinates ``x``, ``y``, ``z`` are returned as float64 whatever
+  their ``SIZE``, as PDAL reads them: the values the text holds
+  (``289814.15 4320978.61`` in ``F 4`` fields would be 289814.16 and
+  4320978.5 as float32, 11 cm off); other fields have their declared type.
 - ``binary``: little-endian records, one per point, fields in header order.
 - ``binary_compressed``: two little-endian uint32 (compressed and
   uncompressed size) then an LZF stream whose content is column-major: all
@@ -25,7 +29,8 @@ The data must hold exactly ``POINTS`` points: missing bytes, or a different
 count of ascii lines, are errors; so are bytes after the binary data, unless
 they are all zero (PCL pads its binary files with zeros).
 
-Writing stores x, y, z as float32 when that is exact, else float64; other
+Writing stores x, y, z as float32 when that is exact, else float64 (in
+ascii, with the digits that give the float32 value back as a float64); other
 fields keep their type (booleans become ``U 1``); ``normals`` is written as
 ``normal_x normal_y normal_z`` and any other ``(n, c)`` field with ``COUNT
 c``. The cloud is written unorganized (``HEIGHT 1``).
@@ -367,7 +372,9 @@ def _read_ascii(path, body, layout, n):
             block = values[:, columns]
             if dt.kind in "iu":
                 check_integral(path, block, dt, f"field {name!r}", f"its {dt} range")
-            block = block.astype(dt)
+            if not (dt.kind == "f" and name in ("x", "y", "z")):
+                block = block.astype(dt)
+            # else float64: the coordinate the text holds, not its rounding
         fields[name] = np.ascontiguousarray(block[:, 0] if count == 1 else block)
     return fields
 
@@ -464,9 +471,13 @@ def _header(columns, n, encoding):
 
 def _ascii_body(columns, n):
     formats, flat = [], []
-    for _, values, kind, size, count in columns:
+    for name, values, kind, size, count in columns:
         block = values.reshape(n, count)
-        fmt = float_format(size) if kind == "F" else "%d"
+        # coordinates are read back as float64 (see the module docstring):
+        # the digits of the float32 value itself, not only those that
+        # round-trip through float32
+        coordinate = name in ("x", "y", "z")
+        fmt = float_format(8 if coordinate else size) if kind == "F" else "%d"
         for j in range(count):
             formats.append(fmt)
             flat.append(block[:, j])

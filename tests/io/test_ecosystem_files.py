@@ -47,10 +47,10 @@ def test_pdal_binary_pcd_is_the_las_it_was_written_from():
 def test_pdal_ascii_pcd_with_any_separator(separator):
     points = read_point_cloud(PDAL / f"utm17_{separator}.pcd")
     assert points.shape == (10, 3)
-    # ascii values stored as F 4: float32 of the text
-    np.testing.assert_array_equal(
-        points[0], np.float32([289814.15, 4320978.61, 170.76]).astype(np.float64)
-    )
+    # ascii values in F 4 fields: the text's own values (as float32 they
+    # would be 289814.16 and 4320978.5, 11 cm off in y)
+    np.testing.assert_array_equal(points[0], [289814.15, 4320978.61, 170.76])
+    np.testing.assert_array_equal(points[-1], [289818.50, 4320980.59, 170.58])
     np.testing.assert_array_equal(points, read_point_cloud(PDAL / "utm17_space.pcd"))
 
 
