@@ -59,3 +59,36 @@ def test_the_rule_sees_a_local_import(tmp_path):
     module = tmp_path / "m.py"
     module.write_text("def f():\n    import numpy\n    from skpcd import io\n")
     assert list(_local_imports(module)) == [(2, "numpy"), (3, "skpcd")]
+
+
+# the import names of the distributions pyproject.toml requires, where they
+# differ from the distribution's name
+_IMPORT_NAMES = {"cloth-simulation-filter": "CSF", "scikit-learn": "sklearn"}
+
+
+def _required_modules():
+    import re
+    import tomllib
+
+    project = tomllib.loads((ROOT.parent / "pyproject.toml").read_text())["project"]
+    names = [re.split(r"[<>=!~\[; ]", d, maxsplit=1)[0] for d in project["dependencies"]]
+    return {_IMPORT_NAMES.get(n, n.replace("-", "_")) for n in names}
+
+
+def test_tests_do_not_skip_when_a_required_dependency_is_missing():
+    # a required dependency that is missing is an error, not a skip: no
+    # test may importorskip one (laspy, lazrs, CSF are required)
+    required = _required_modules()
+    assert {"laspy", "lazrs", "CSF", "numpy"} <= required
+    skipped = []
+    for path in sorted((ROOT.parent / "tests").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if (
+                isinstance(node, ast.Call)
+                and getattr(node.func, "attr", None) == "importorskip"
+                and node.args
+                and isinstance(node.args[0], ast.Constant)
+                and node.args[0].value in required  # (not a version's submodule)
+            ):
+                skipped.append(f"{path.name}:{node.lineno} {node.args[0].value}")
+    assert skipped == []

@@ -523,8 +523,6 @@ def _tree_bytes(folder):
 
 @pytest.mark.parametrize("ext", [".las", ".ply"])
 def test_segment_tiled_writes_the_untiled_files(tmp_path, capsys, ext, scene_file):
-    if ext == ".las":
-        pytest.importorskip("laspy")
     scene = tmp_path / f"scene{ext}"
     scene_file(scene, random_state=2)
     args = ["segment", str(scene), "--eps", "1.0", "--min-size", "30", "--quiet"]

@@ -9,7 +9,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from skpcd.cli import main
 from skpcd.io import write_labelled_scan, write_point_cloud
@@ -36,7 +35,6 @@ def test_las_header_crs_vlrs_and_histograms(capsys):
 
 
 def test_crs_from_the_geokeys_says_so(capsys):
-    pytest.importorskip("laspy")
     out = _info(capsys, LAS / "autzen_geokeys.las")
     (line,) = [s for s in out.splitlines() if s.startswith("crs")]
     try:

@@ -4,13 +4,12 @@ extra dimension through segment, fit (default and case-based), identify
 
 import csv
 
+import laspy
 import numpy as np
 import pytest
 
 from skpcd.cli import main
 from skpcd.io import read_class_names, write_point_cloud
-
-laspy = pytest.importorskip("laspy")
 
 
 def _las_scene(path, random_state=0):

@@ -7,6 +7,7 @@ import json
 import re
 import shutil
 
+import laspy
 import numpy as np
 import pytest
 
@@ -18,8 +19,6 @@ from skpcd.io import (
     read_predicted_labels,
     write_point_cloud,
 )
-
-laspy = pytest.importorskip("laspy")
 
 TRAIN = ["semantickitti_05_000000.laz", "semantickitti_07_000000.laz"]
 TEST = "semantickitti_04_000000.laz"

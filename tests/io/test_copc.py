@@ -7,21 +7,19 @@ import struct
 from pathlib import Path
 
 import joblib
+import laspy
 import numpy as np
 import pytest
 
-laspy = pytest.importorskip("laspy")
-pytest.importorskip("lazrs")
-
-import skpcd.segmentation.tiling._dispatch as dispatch  # noqa: E402
-import skpcd.segmentation.tiling._spill as spill  # noqa: E402
-from skpcd.exceptions import PointCloudFileError  # noqa: E402
-from skpcd.io import read_point_cloud, write_labelled_scan  # noqa: E402
-from skpcd.io._copc import is_copc, read_copc_index, read_nodes  # noqa: E402
-from skpcd.io._las_reader import read_vlr_records  # noqa: E402
-from skpcd.io._las_structure import checked_layout  # noqa: E402
-from skpcd.segmentation import GroundFilter, segment_scene  # noqa: E402
-from skpcd.segmentation.tiling._octree import OctreeScene, OctreeTile  # noqa: E402
+import skpcd.segmentation.tiling._dispatch as dispatch
+import skpcd.segmentation.tiling._spill as spill
+from skpcd.exceptions import PointCloudFileError
+from skpcd.io import read_point_cloud, write_labelled_scan
+from skpcd.io._copc import is_copc, read_copc_index, read_nodes
+from skpcd.io._las_reader import read_vlr_records
+from skpcd.io._las_structure import checked_layout
+from skpcd.segmentation import GroundFilter, segment_scene
+from skpcd.segmentation.tiling._octree import OctreeScene, OctreeTile
 
 COPC = Path(__file__).parents[1] / "data" / "copc" / "simple.copc.laz"
 N_POINTS = 1065

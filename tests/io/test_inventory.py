@@ -9,6 +9,7 @@ import math
 import struct
 import sys
 
+import laspy
 import numpy as np
 import pytest
 
@@ -23,7 +24,6 @@ from skpcd.segmentation._inventory import (
     segment_geometry,
 )
 
-laspy = pytest.importorskip("laspy")
 pyogrio = pytest.importorskip("pyogrio")
 
 EPSG = 25832  # ETRS89 / UTM zone 32N

@@ -3,6 +3,7 @@
 import hashlib
 import json
 
+import laspy
 import numpy as np
 import pytest
 
@@ -13,8 +14,6 @@ from skpcd.io import (
     write_labelled_scan,
     write_point_cloud,
 )
-
-laspy = pytest.importorskip("laspy")
 
 NAMES = ["building", "street_lamp", "a very long class name", "unknown"]
 FORMATS = [(3, "1.2"), (6, "1.4")]

@@ -9,8 +9,6 @@ import pytest
 from skpcd.exceptions import PointCloudFileError
 from skpcd.io import _las, read_point_cloud, write_point_cloud
 
-laspy = pytest.importorskip("laspy")
-
 EXTENSIONS = [".las", ".laz"]
 
 

@@ -15,15 +15,12 @@ import subprocess
 import sys
 import textwrap
 
+import laspy
 import numpy as np
 import pytest
 
 from skpcd.exceptions import PointCloudFileError
 from skpcd.io import iter_points, read_las_extent, read_point_cloud
-
-laspy = pytest.importorskip("laspy")
-pytest.importorskip("lazrs")
-
 
 # --- writing and corrupting files -----------------------------------------
 

@@ -4,6 +4,7 @@ maps, and the errors of each."""
 
 import re
 
+import laspy
 import numpy as np
 import pytest
 
@@ -16,8 +17,6 @@ from skpcd.io import (
     write_point_cloud,
 )
 from skpcd.io._point_labels import SEMANTICKITTI_NAMES
-
-laspy = pytest.importorskip("laspy")
 
 KITTI = "semantickitti_04_000000.laz"
 PANDASET = "pandaset_001_00.laz"

@@ -6,6 +6,7 @@ in tiles and from the CLI."""
 import warnings
 from pathlib import Path
 
+import laspy
 import numpy as np
 import pytest
 
@@ -14,8 +15,6 @@ from skpcd.exceptions import PointCloudFileError, SegmentationWarning
 from skpcd.io import read_point_cloud, read_segments, write_point_cloud
 from skpcd.segmentation import segment_scene
 from skpcd.segmentation.ground import ClassifiedGround
-
-laspy = pytest.importorskip("laspy")
 
 SWEEP = Path("/work/shared/data/real_mobile/scans/pandaset_000200.las")
 pytestmark = pytest.mark.skipif(not SWEEP.exists(), reason="real sweeps not here")

@@ -250,7 +250,6 @@ def test_the_relative_radius_bridges_the_rings_of_a_16_beam_robot():
 
 
 def test_tiled_auto_tells_the_kind_from_the_file_and_takes_smrf(tmp_path):
-    pytest.importorskip("laspy")
     from skpcd.io import read_point_cloud, write_point_cloud
 
     s = make_street_scene(40.0, scanner="aerial", random_state=5)

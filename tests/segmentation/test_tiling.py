@@ -160,7 +160,6 @@ def test_tiled_estimates_eps_once_like_untiled(scene):
 
 
 def test_tiled_euclidean_without_ground_and_from_a_las_file(scene, tmp_path):
-    pytest.importorskip("laspy")
     from skpcd.io import read_point_cloud, write_point_cloud
 
     points, _ = scene
@@ -238,7 +237,6 @@ def test_buffer_too_small_for_eps(scene):
 
 
 def test_a_las_header_with_wrong_bounds_is_tiled_on_the_true_bounds(tmp_path):
-    pytest.importorskip("laspy")
     import struct
 
     from skpcd.io import read_las_extent, read_point_cloud, write_point_cloud

@@ -123,7 +123,6 @@ def street_scan(length=240.0, density=40.0, n_objects=30, seed=0):
 
 @pytest.fixture(scope="module")
 def street(tmp_path_factory):
-    pytest.importorskip("laspy")
     from skpcd.io import read_point_cloud, write_point_cloud
 
     points, truth = street_scan()

@@ -2,15 +2,13 @@
 written in place, the index lists read in one piece; the same ground flags
 as the straightforward computation, on a real sweep."""
 
+import CSF
 import numpy as np
-import pytest
 
 from skpcd.io import read_point_cloud
 from skpcd.segmentation.ground import _csf
 from skpcd.segmentation.ground._csf import _far_fill, _indices, csf_ground
 from skpcd.utils._geometry import point_bounds
-
-CSF = pytest.importorskip("CSF")
 
 PARAMS = {
     "cloth_resolution": 1.0, "class_threshold": 0.3, "rigidness": 3,
