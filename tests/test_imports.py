@@ -4,6 +4,7 @@ heavy dependency, loaded on first use, and the CLI imports the library inside
 its commands so that ``skpcd --help`` starts fast."""
 
 import ast
+import re
 from pathlib import Path
 
 import skpcd
@@ -67,11 +68,12 @@ _IMPORT_NAMES = {"cloth-simulation-filter": "CSF", "scikit-learn": "sklearn"}
 
 
 def _required_modules():
-    import re
-    import tomllib
-
-    project = tomllib.loads((ROOT.parent / "pyproject.toml").read_text())["project"]
-    names = [re.split(r"[<>=!~\[; ]", d, maxsplit=1)[0] for d in project["dependencies"]]
+    # the quoted entries of pyproject.toml's ``dependencies = [...]`` (no
+    # tomllib: Python 3.10 is supported)
+    text = (ROOT.parent / "pyproject.toml").read_text()
+    block = text.split("\ndependencies = [", 1)[1].split("\n]", 1)[0]
+    entries = re.findall(r'^\s*"([^"]+)"', block, flags=re.M)
+    names = [re.split(r"[<>=!~\[; ]", d, maxsplit=1)[0] for d in entries]
     return {_IMPORT_NAMES.get(n, n.replace("-", "_")) for n in names}
 
 
@@ -92,3 +94,49 @@ def test_tests_do_not_skip_when_a_required_dependency_is_missing():
             ):
                 skipped.append(f"{path.name}:{node.lineno} {node.args[0].value}")
     assert skipped == []
+
+
+def _package(module):
+    """The package of a module of skpcd: ``skpcd.io._las`` -> ``io``; a
+    module at the top (``skpcd._interrupts``) is its own."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else ""
+
+
+def _private_names_across_packages(root):
+    found = []
+    for path in sorted(root.rglob("*.py")):
+        rel = path.relative_to(root.parent).with_suffix("")
+        here = ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.ImportFrom) or not node.module:
+                continue
+            if not node.module.startswith(root.name) or node.level:
+                continue
+            for alias in node.names:
+                target = f"{node.module}.{alias.name}"
+                # a name imported from another package, or a module of its
+                # own imported by a private name, must be public
+                other = _package(node.module) != _package(here)
+                dunder = alias.name.startswith("__") and alias.name.endswith("__")
+                if alias.name.startswith("_") and other and not dunder:
+                    found.append(f"{rel}:{node.lineno} {target}")
+    return found
+
+
+def test_names_used_across_packages_are_public():
+    assert _private_names_across_packages(ROOT) == []
+
+
+def test_the_rule_sees_a_private_name_from_another_package(tmp_path):
+    pkg = tmp_path / "skpcd"
+    (pkg / "cli").mkdir(parents=True)
+    (pkg / "io").mkdir()
+    (pkg / "cli" / "_x.py").write_text(
+        "from skpcd.io._f import _hidden, shown\nfrom skpcd import _interrupts\n"
+    )
+    (pkg / "io" / "_g.py").write_text("from skpcd.io._f import _hidden\n")
+    assert _private_names_across_packages(pkg) == [
+        "skpcd/cli/_x:1 skpcd.io._f._hidden",
+        "skpcd/cli/_x:2 skpcd._interrupts",
+    ]

@@ -317,14 +317,14 @@ def _child(work, journal_fd, scratch, catchable):
     import tempfile
     import traceback
 
-    from skpcd import _interrupts
+    from skpcd._interrupts import start_journal
 
     status = 1
     try:
         for signum in catchable:
             signal.signal(signum, signal.default_int_handler)
         _end_with_parent()
-        _interrupts.start_journal(journal_fd)
+        start_journal(journal_fd)
         tempfile.tempdir = scratch
         os.environ["TMPDIR"] = scratch
         status = work()

@@ -61,7 +61,7 @@ def add_parser(sub):
 
 def _existing_labels(args, names):
     """The labels already given, for the segments of the folder only."""
-    from skpcd.io._segment_folder import _read_labels
+    from skpcd.io._segment_folder import read_labels
 
     path = args.labels
     if path is None:
@@ -69,7 +69,7 @@ def _existing_labels(args, names):
         if not default.is_file():
             return None, {}
         path = default
-    path, mapping = _read_labels(path)
+    path, mapping = read_labels(path)
     unknown = sorted(set(mapping) - set(names))
     if unknown:
         print(

@@ -32,6 +32,7 @@ __all__ = [
     "SEGMENT_FORMATS",
     "check_segment_run",
     "is_segment_run_file",
+    "read_labels",
     "read_segments",
     "write_segment_folder",
 ]
@@ -211,7 +212,28 @@ def _list_files(folder_or_glob, labels_path):
     return [files[i] for i in order], [names[i] for i in order]
 
 
-def _read_labels(path):
+def read_labels(path):
+    """The labels of a folder of segments: a CSV file of ``file,label`` rows.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The labels file; a first row ``file,label`` is a header and skipped,
+        blank rows are skipped.
+
+    Returns
+    -------
+    path : Path
+        The file, checked to be a regular file.
+    mapping : dict of str to str
+        File name (as written, relative to the folder) to label.
+
+    Raises
+    ------
+    PointCloudFileError
+        If the file is empty, a row does not have two columns, or a file is
+        given two labels.
+    """
     path = check_regular_file(path)
     with open(path, newline="", encoding="utf-8") as fh:
         rows = [row for row in csv.reader(fh) if row and any(c.strip() for c in row)]
@@ -295,7 +317,7 @@ def read_segments(
     """
     if errors not in ("raise", "skip"):
         raise ValueError(f"errors must be 'raise' or 'skip', got {errors!r}")
-    labels_path, mapping = (None, None) if labels is None else _read_labels(labels)
+    labels_path, mapping = (None, None) if labels is None else read_labels(labels)
     files, names = _list_files(folder_or_glob, labels_path)
     if mapping is not None:
         unknown = sorted(set(mapping) - set(names), key=_natural_key)

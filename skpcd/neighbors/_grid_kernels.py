@@ -148,7 +148,7 @@ def _gap(q, origin, h, a):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _lower(cell_key, lo, hi, key):
+def lower_cell(cell_key, lo, hi, key):
     """First cell in ``[lo, hi)`` whose key is >= ``key``; inlined (arrays)."""
     while lo < hi:
         mid = (lo + hi) >> 1
@@ -202,7 +202,7 @@ def cell_block(cell, prev, grid, cur, starts, stops):
         col = (xx * ny + yy) * nz
         k_lo = col + max(z - 1, 0)
         if cur[j] < 0:
-            p = _lower(cell_key, c_lo, c_hi, k_lo)
+            p = lower_cell(cell_key, c_lo, c_hi, k_lo)
         else:
             p = cur[j]
             while p < c_hi and cell_key[p] < k_lo:
@@ -462,7 +462,7 @@ def knn_cells(lo, hi, cells, grid, indptr, max_shell, todo, indices, sqdist, har
                                 continue
                             else:
                                 z_lo = z_hi = zz
-                            q = _lower(cell_key, c_lo, c_hi, col + z_lo)
+                            q = lower_cell(cell_key, c_lo, c_hi, col + z_lo)
                             n_runs = _add_run(
                                 cell_key, cell_start, q, c_hi, col + z_hi,
                                 shell_start, shell_stop, n_runs,

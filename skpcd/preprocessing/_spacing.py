@@ -4,6 +4,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 __all__ = [
+    "LOCAL_RATIO",
     "nearest_neighbours",
     "point_spacing",
     "spacing_of",
@@ -90,14 +91,14 @@ def spacing_of(dist, quantile=0.5):
 # Clouds of at most this many points per query point are searched with one
 # k-d tree of all their points; larger ones with a tree of the points near
 # the queries (nearest_neighbours).
-_LOCAL_RATIO = 20
+LOCAL_RATIO = 20
 # The cubes of cells around a query reach this many cells on each side.
 _REACH = 1
 # The first cells' side, in spacings of the queries scaled to the cloud.
 _FIRST_CELL = 5.0
 
 
-def nearest_neighbours(xyz, queries, k, *, workers=1, local_ratio=_LOCAL_RATIO):
+def nearest_neighbours(xyz, queries, k, *, workers=1, local_ratio=LOCAL_RATIO):
     """The ``k`` nearest points of ``xyz`` to each query point: distances
     and rows, as ``scipy.spatial.cKDTree(xyz).query(queries, k)`` gives
     them, without a tree of the whole cloud when it is large.

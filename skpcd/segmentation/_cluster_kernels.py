@@ -15,8 +15,7 @@ nearest core point within ``eps``. Memory is O(n_points).
 import numpy as np
 from numba import njit
 
-from skpcd.neighbors._grid_kernels import _lower as lower_cell
-from skpcd.neighbors._grid_kernels import cell_block, sqdist_to
+from skpcd.neighbors._grid_kernels import cell_block, lower_cell, sqdist_to
 from skpcd.segmentation._union_find import find_root, union_lower
 from skpcd.utils._numba import borrow, keep
 

@@ -8,7 +8,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from skpcd.preprocessing._spacing import (
-    _LOCAL_RATIO,
+    LOCAL_RATIO,
     nearest_neighbours,
     spacing_of,
     spacing_queries,
@@ -224,7 +224,7 @@ def describe_scan(points, *, sensor=None, scan_angle=None, random_state=0):
     return ScanKind("profiler", "points spread along a path", **measured)
 
 
-def _spacing_vertical(xyz, shape_queries, local_ratio=_LOCAL_RATIO):
+def _spacing_vertical(xyz, shape_queries, local_ratio=LOCAL_RATIO):
     """The spacing of the points (:func:`~skpcd.preprocessing.point_spacing`
     on ``_SAMPLE`` of them, seed 0) and the fraction of vertical planar
     neighbourhoods (:func:`_vertical_fraction`) around ``shape_queries``.
