@@ -281,9 +281,9 @@ def run(methods):
         xyz = np.load(autzen)["xyz"] * 0.3048  # international feet to metres
         for m in ("auto", "previous"):
             labels, ground, eps, kind = segment(m, xyz)
-            from skpcd.segmentation._scene import _largest_box
+            from skpcd.segmentation._scene_clusters import largest_box
 
-            ext, _ = _largest_box(xyz, labels)
+            ext, _ = largest_box(xyz, labels)
             results["aerial"].setdefault(m, {})["autzen_trim"] = {
                 "kind": kind, "eps": eps, "segments": int(labels.max()) + 1,
                 "largest_segment_m": [float(v) for v in ext],

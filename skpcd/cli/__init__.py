@@ -4,8 +4,10 @@ One module per command (or pair of commands), each with ``add_parser(s)``
 and ``run_*`` functions: ``_info`` (info), ``_evaluate`` (evaluate, score),
 ``_model`` (fit, predict), ``_scan_labels`` (score-scan, and the options
 of fit on labelled scans), ``_describe`` (describe), ``_segment`` (segment,
-identify), ``_simulate`` (simulate); ``_common`` holds the shared options,
-the output checks and the way a command ends (:func:`skpcd.cli._common.run`).
+and the segmentation identify shares), ``_identify`` (identify), ``_simulate``
+(simulate); ``_common`` holds the shared options,
+the output checks; ``_process`` the way a command runs and ends
+(:func:`skpcd.cli._process.run`).
 """
 
 import os
@@ -43,6 +45,7 @@ import argparse  # noqa: E402
 from skpcd.cli import (  # noqa: E402
     _describe,
     _evaluate,
+    _identify,
     _info,
     _model,
     _review,
@@ -50,8 +53,9 @@ from skpcd.cli import (  # noqa: E402
     _segment,
     _simulate,
 )
-from skpcd.cli._common import on_cluster, run, supervised  # noqa: E402
+from skpcd.cli._common import on_cluster  # noqa: E402
 from skpcd.cli._evaluate import format_report  # noqa: E402
+from skpcd.cli._process import run, supervised  # noqa: E402
 
 __all__ = ["build_parser", "format_report", "main"]
 
@@ -77,7 +81,8 @@ def build_parser():
     _model.add_parsers(sub)
     _scan_labels.add_parser(sub)
     _describe.add_parser(sub)
-    _segment.add_parsers(sub)
+    _segment.add_parser(sub)
+    _identify.add_parser(sub)
     _review.add_parser(sub)
     _simulate.add_parser(sub)
     return parser
@@ -92,7 +97,7 @@ def main(argv=None):
         Arguments; ``sys.argv[1:]`` when None. When None (the ``skpcd``
         command itself) the work runs in a child process, so that Ctrl-C
         and SIGTERM end the command within a second whatever it is doing
-        (:func:`skpcd.cli._common.supervised`); with ``argv`` given it
+        (:func:`skpcd.cli._process.supervised`); with ``argv`` given it
         runs in this process.
 
     Returns

@@ -17,13 +17,14 @@ import importlib
 from skpcd.segmentation._clusters import EuclideanClusters, euclidean_clusters
 from skpcd.segmentation._dbscan import AutoEpsDBSCAN, estimate_eps
 from skpcd.segmentation._eps_plot import plot_eps_curve
+from skpcd.segmentation._result import SceneSegmentation
 from skpcd.segmentation._scan_kind import (
     SCAN_KINDS,
     ScanKind,
     describe_scan,
     sweep_coordinates,
 )
-from skpcd.segmentation._scene import SceneSegmentation, segment_scene
+from skpcd.segmentation._scene import segment_scene
 from skpcd.segmentation._structures import STRUCTURE_DEFAULTS
 from skpcd.segmentation.ground import GROUND_PRESETS, GroundFilter
 from skpcd.segmentation.tiling import TiledScene, TileGrid, tile_scene

@@ -17,7 +17,7 @@ import pytest
 from numba.core import event
 
 from skpcd.cli import _evaluate, _segment
-from skpcd.cli._common import run
+from skpcd.cli._process import run
 from skpcd.utils._compile import QUIET_ENV, STAGES
 
 # Runs the command in this process (its exit status kept; ``python -m

@@ -144,9 +144,9 @@ def test_an_automatic_eps_that_joins_the_tile_is_halved_with_a_warning():
         seg = segment_scene(xyz, ground=None, structures=False, min_cluster_size=5)
     first = float(str(rec[0].message).split("automatic eps ")[1].split()[0])
     assert seg.eps < first
-    from skpcd.segmentation._scene import _largest_box
+    from skpcd.segmentation._scene_clusters import largest_box
 
-    _, area = _largest_box(xyz, seg.labels)
+    _, area = largest_box(xyz, seg.labels)
     assert area <= 0.5 * 300.0**2
     # a radius given is used as given, without a warning
     with warnings.catch_warnings():

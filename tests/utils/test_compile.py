@@ -141,7 +141,7 @@ def test_cold_cache_says_it_once_warm_cache_says_nothing(tmp_path):
 def test_command_line_says_it_once_unless_quiet(capsys, loud, quiet):
     from argparse import Namespace
 
-    from skpcd.cli._common import run
+    from skpcd.cli._process import run
 
     def command(args):
         _compile_event()
