@@ -7,11 +7,8 @@ import numpy as np
 import pytest
 
 from skpcd.segmentation._dbscan import sample_queries
-from skpcd.segmentation.tiling._segment import (
-    _link_pairs,
-    _stitch,
-    chunked_sample_queries,
-)
+from skpcd.segmentation.tiling._eps import chunked_sample_queries
+from skpcd.segmentation.tiling._segment import _link_pairs, _stitch
 
 
 def _chain(n_tiles, n_own, n_shared):

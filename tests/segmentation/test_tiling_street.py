@@ -20,7 +20,8 @@ from skpcd.segmentation import GROUND_PRESETS, GroundFilter, TileGrid
 from skpcd.segmentation import segment_scene as _segment_scene
 from skpcd.segmentation.ground._filter import fit_window
 from skpcd.segmentation.ground._smrf import reach_cells
-from skpcd.segmentation.tiling._segment import chunked_nanmedian, default_buffer
+from skpcd.segmentation.tiling._ground import chunked_nanmedian
+from skpcd.segmentation.tiling._segment import default_buffer
 
 
 def segment_scene(*args, **kwargs):

@@ -15,26 +15,21 @@ from pathlib import Path
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
-from sklearn.utils import check_random_state
 
 from skpcd.io._common import check_chunk_size
 from skpcd.segmentation._clusters import EUCLIDEAN_EPS, grid_dbscan
-from skpcd.segmentation._dbscan import (
-    AutoEpsDBSCAN,
-    eps_from_knee,
-    fit_knee,
-    kdist_mean,
-    sample_queries,
-    stable_draw,
-)
 from skpcd.segmentation._structures import segment_structures
-from skpcd.segmentation.ground._bases import BASE_THRESHOLD
-from skpcd.segmentation.ground._cloth import StreamedCloth
-from skpcd.segmentation.ground._filter import bases_filter, csf_params, fit_window
-from skpcd.segmentation.ground._smrf import reach_cells
 from skpcd.segmentation.tiling._dispatch import map_tiles
-from skpcd.segmentation.tiling._geometry import held_square, reaches
+from skpcd.segmentation.tiling._eps import estimate_tiled_eps
+from skpcd.segmentation.tiling._ground import (
+    bases_tiled,
+    csf_tiled,
+    fill_given,
+    ground_prepare,
+    ground_reach,
+    ground_tile,
+    windowed_filter,
+)
 from skpcd.segmentation.tiling._spill import (
     detach,
     result_array,
@@ -42,211 +37,7 @@ from skpcd.segmentation.tiling._spill import (
 )
 from skpcd.utils._memory import release_free_memory
 
-__all__ = ["segment_tiled"]
-
-
-# --- the ground filter on a window of the scene's raster -------------------
-
-
-def ground_reach(filt):
-    """How far (in metres) the ground filter's answer at a point depends on
-    the points around it: :func:`~skpcd.segmentation.ground._smrf.reach_cells`
-    cells beyond the point's own, plus one for the rounding of the tile and
-    cell edges."""
-    return (reach_cells(filt) + 1) * float(filt.cell)
-
-
-def _ground_prepare(xyz, index, ground, tile, grid, lo, nxy, cell, reach):
-    """The points of a buffered tile in the cells of its core square grown by
-    the ground filter's reach, with the window of the scene's raster they
-    span; and the scan indices of the tile's own points."""
-    owned = grid.owner(xyz) == tile
-    x0, y0, x1, y1 = grid.core_bounds(tile)
-    start = np.floor((np.array([x0, y0]) - reach - lo) / cell).astype(np.int64)
-    stop = np.floor((np.array([x1, y1]) + reach - lo) / cell).astype(np.int64)
-    start = np.clip(start, 0, nxy - 1)
-    stop = np.clip(stop, 0, nxy - 1)
-    cells = np.clip(np.floor((xyz[:, :2] - lo) / cell), 0, nxy - 1).astype(np.int64)
-    sel = np.all((cells >= start) & (cells <= stop), axis=1)
-    raster = (
-        float(lo[0]), float(lo[1]), int(nxy[0]), int(nxy[1]),
-        int(start[0]), int(start[1]),
-        int(stop[0] - start[0] + 1), int(stop[1] - start[1] + 1),
-    )  # fmt: skip
-    return (np.ascontiguousarray(xyz[sel]), owned[sel], raster), index[owned]
-
-
-def _ground_tile(xyz, owned, raster, filt, n_threads):
-    """Ground flags of the owned points of a buffered tile."""
-    if len(xyz) == 0:
-        return np.zeros(0, dtype=bool)
-    return fit_window(filt, xyz, raster, n_threads).ground_[owned]
-
-
-def _owned_prepare(xyz, index, ground, tile, grid):
-    """The points a tile owns, and their scan indices."""
-    own = grid.owner(xyz) == tile
-    return (np.ascontiguousarray(xyz[own]),), index[own]
-
-
-def _cloth_tile(xyz, cloth, n_threads):
-    """CSF's flags of a tile's own points, and the bounds of its ground."""
-    flags = cloth.classify(xyz)
-    g = xyz[flags, :2]
-    bounds = (g.min(axis=0), g.max(axis=0)) if len(g) else None
-    return flags, bounds
-
-
-def _owned_points(scene, tile):
-    xyz, index = scene.load(tile)
-    own = scene.grid.owner(xyz) == tile
-    return xyz[own], index[own]
-
-
-def _csf_tiled(scene, tiles, filt, is_ground, n_jobs):
-    """CSF's flags of the whole scan, tile by tile: the cloth of the whole
-    scan from one point per particle (:class:`StreamedCloth`, two passes
-    over the tiles here), then each tile's points tested against it.
-    Returns the bounds of the ground points (None: no ground)."""
-    cloth = StreamedCloth(csf_params(filt), scene.mins, scene.maxs, scene.n_points)
-    if cloth.needs_cells:
-        for t in tiles:
-            cloth.add_cells(_owned_points(scene, t)[0])
-            release_free_memory()
-    for t in tiles:
-        cloth.sample(*_owned_points(scene, t))
-        release_free_memory()
-    cloth.simulate()
-    lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
-    for index, (flags, bounds) in map_tiles(
-        scene, tiles, _owned_prepare, (scene.grid,), _cloth_tile, (cloth,), n_jobs
-    ):
-        is_ground[index] = flags
-        if bounds is not None:
-            lo, hi = np.minimum(lo, bounds[0]), np.maximum(hi, bounds[1])
-    return None if lo[0] > hi[0] else (lo, hi)
-
-
-def _bases_prepare(xyz, index, ground, tile, grid, lo, nxy, cell, reach):
-    """:func:`_ground_prepare` of the tile's ground points."""
-    return _ground_prepare(
-        np.ascontiguousarray(xyz[ground]), index[ground], None, tile, grid, lo, nxy,
-        cell, reach,
-    )  # fmt: skip
-
-
-def _bases_tile(xyz, owned, raster, filt, n_threads):
-    """The second filter of the ``keep_bases`` pass on a tile's ground
-    points: which of its own it keeps, and their heights above its terrain
-    (absolute)."""
-    if len(xyz) == 0:
-        return np.zeros(0, dtype=bool), np.zeros(0)
-    est = fit_window(filt, xyz, raster, n_threads)
-    own = np.ascontiguousarray(xyz[owned])
-    height = np.abs(own[:, 2] - est._terrain.sample(own, False, n_threads))
-    return est.ground_[owned], height
-
-
-def _bases_tiled(scene, tiles, ground_bounds, reach, ground, out, n_jobs, chunk_size):
-    """:func:`~skpcd.segmentation.ground._bases.without_bases` tile by tile:
-    the bases filter on each tile's ground points in the window of the
-    raster of all ground points grown by its reach; the robust spread of
-    the heights of the kept points, over the whole scan; and, when that
-    raises the threshold, the filter again with it. Clears the bases in
-    the ground flags ``ground = (flags, path)``."""
-    is_ground = ground[0]
-    n_ground = 0
-    for start in range(0, scene.n_points, chunk_size):
-        n_ground += int(is_ground[start : start + chunk_size].sum())
-    if ground_bounds is None or n_ground < 3:
-        return
-    filt = bases_filter()
-    cell = float(filt.cell)
-    lo, hi = ground_bounds
-    nxy = (np.floor((hi - lo) / cell) + 1).astype(np.int64)
-    pargs = (scene.grid, lo, nxy, cell, reach)
-    n = scene.n_points
-    kept = result_array(out, "bases_kept.npy", n, np.bool_, False)
-    height = result_array(out, "bases_height.npy", n, np.float64, np.nan)
-    for index, (k, h) in map_tiles(
-        scene, tiles, _bases_prepare, pargs, _bases_tile, (filt,), n_jobs,
-        ground=ground,
-    ):  # fmt: skip
-        kept[index] = k
-        height[index] = h
-    sigma = 1.4826 * chunked_nanmedian(height, kept, chunk_size)
-    if 3.0 * sigma > BASE_THRESHOLD:
-        filt = bases_filter(3.0 * float(sigma))
-        for index, (k, _) in map_tiles(
-            scene, tiles, _bases_prepare, pargs, _bases_tile, (filt,), n_jobs,
-            ground=ground,
-        ):  # fmt: skip
-            kept[index] = k
-    for start in range(0, n, chunk_size):
-        part = slice(start, start + chunk_size)
-        is_ground[part] &= kept[part]
-
-
-def chunked_nanmedian(values, mask, chunk_size):
-    """``np.nanmedian(values[mask])`` (NaN when empty), bit for bit, in
-    passes over chunks: a histogram of the values' leading bits finds the
-    bins of the middle ranks, then only the values in those bins are held.
-
-    Parameters
-    ----------
-    values : ndarray of shape (n,), dtype float64
-        Non-negative values or NaN (a memory map: read chunk by chunk).
-    mask : ndarray of shape (n,), dtype bool
-        Which values count.
-    chunk_size : int
-        Values read at a time.
-    """
-
-    def chunks():
-        for start in range(0, len(values), chunk_size):
-            v = np.asarray(values[start : start + chunk_size])
-            v = v[np.asarray(mask[start : start + chunk_size]) & ~np.isnan(v)]
-            # non-negative float64: their bit patterns sort as they do
-            yield v, v.view(np.int64) >> 44
-
-    counts = np.zeros(2**19, dtype=np.int64)
-    for _, top in chunks():
-        counts += np.bincount(top, minlength=len(counts))
-    total = int(counts.sum())
-    if total == 0:
-        return np.nan
-    ranks = sorted({(total - 1) // 2, total // 2})
-    cum = np.cumsum(counts)
-    bins = [int(np.searchsorted(cum, r, side="right")) for r in ranks]
-    held = np.concatenate([v[np.isin(top, bins)] for v, top in chunks()])
-    held.sort()
-    first = int(cum[bins[0] - 1]) if bins[0] > 0 else 0
-    middle = held[[r - first for r in ranks]]
-    return float(np.mean(middle))
-
-
-def _fill_given(is_ground, chunks):
-    """The ground flags given in chunks, copied into ``is_ground``; a
-    ValueError unless they are one per point."""
-    start = 0
-    for flags in chunks:
-        stop = start + len(flags)
-        if stop <= len(is_ground):
-            is_ground[start:stop] = flags
-        start = stop
-    if start != len(is_ground):
-        raise ValueError(
-            f"the ground flags given hold {start} values for {len(is_ground)} points"
-        )
-
-
-def windowed_filter(ground):
-    """The filter the tiles run on windows of the scene's raster: SMRF, or
-    with CSF (one cloth for the whole scan) the second filter of
-    ``keep_bases``; None when there is none."""
-    if ground is not None and ground.method == "csf":
-        return bases_filter() if ground.keep_bases else None
-    return ground
+__all__ = ["default_buffer", "segment_tiled"]
 
 
 def default_buffer(tile_size, ground, eps, structures):
@@ -501,170 +292,6 @@ def _cluster_tile(xyz, owned, eps, min_samples, n_threads):
     return labels[owned], shared, labels[shared], None
 
 
-def _eps_prepare(xyz, index, ground, tile, grid, queries):
-    """The non-ground points of a buffered tile and, among its own points,
-    the queries of the eps estimate with their distance to the edge of the
-    area the tile holds; the scan indices of those queries."""
-    mine = np.flatnonzero(grid.owner(xyz) == tile)
-    mine = mine[np.isin(index[mine], queries)]
-    if not len(mine):
-        return (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)), index[mine]
-    x0, y0, x1, y1 = held_square(grid, tile, grid.buffer)
-    q = xyz[mine]
-    margin = np.minimum(
-        np.minimum(q[:, 0] - x0, x1 - q[:, 0]), np.minimum(q[:, 1] - y0, y1 - q[:, 1])
-    )
-    return (np.ascontiguousarray(xyz[~ground]), q, margin), index[mine]
-
-
-def _eps_tile(points, queries, margin, k, n_threads):
-    """Distances from each query to its ``k`` nearest ``points`` (itself
-    first), and which are exact: those whose ``k``-th neighbour is nearer
-    than the edge of the tile's area (``margin``), so that no point beyond
-    it could be nearer; the others (isolated points, whose neighbours are
-    far) come with their coordinates, for :func:`_eps_far_queries`."""
-    if not len(queries):
-        return np.zeros((0, k)), np.ones(0, dtype=bool), np.zeros((0, 3))
-    tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
-    d, _ = tree.query(queries, k=k, workers=n_threads)
-    d = d.reshape(len(queries), -1)
-    exact = d[:, -1] + 1e-6 < margin
-    return d, exact, queries[~exact]
-
-
-def _far_prepare(xyz, index, ground, tile, grid, queries, bounds):
-    """The non-ground points a tile owns, and the queries (rows of
-    ``queries``) whose ball of radius ``bounds`` reaches its core square
-    (unbounded at the grid's edges, like the area its points come from)."""
-    near = np.flatnonzero(reaches(grid, tile, queries, bounds))
-    own = (grid.owner(xyz) == tile) & ~ground
-    if not len(near) or not own.any():
-        return (np.zeros((0, 3)), np.zeros((0, 3))), np.zeros(0, dtype=np.int64)
-    return (np.ascontiguousarray(xyz[own]), queries[near]), near
-
-
-def _far_tile(points, queries, k, n_threads):
-    """Distances from each query to its ``k`` nearest ``points`` (+inf when
-    there are fewer)."""
-    if not len(queries):
-        return np.zeros((0, k))
-    tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
-    d, _ = tree.query(queries, k=k, workers=n_threads)
-    return d.reshape(len(queries), -1)
-
-
-def _eps_far_queries(scene, tiles, ground, queries, bounds, k, n_jobs):
-    """The exact distances from each query to its ``k`` nearest non-ground
-    points, for queries whose neighbours their own tile may not hold:
-    each tile whose core square is within ``bounds`` of a query (the
-    distance of its ``k``-th neighbour found in its tile, which the true one
-    cannot exceed) gives the ``k`` nearest of the points it owns, and the
-    ``k`` smallest of those distances are the query's (every point is owned
-    by one tile)."""
-    near = [t for t in tiles if reaches(scene.grid, t, queries, bounds).any()]
-    parts = [[] for _ in range(len(queries))]
-    for rows, d in map_tiles(
-        scene, near, _far_prepare, (scene.grid, queries, bounds), _far_tile,
-        (k,), n_jobs, ground=ground,
-    ):  # fmt: skip
-        for row, dist in zip(rows.tolist(), d):
-            parts[row].append(dist)
-    found = np.empty((len(queries), k))
-    for row, dists in enumerate(parts):
-        found[row] = np.sort(np.concatenate(dists))[:k]
-    return found
-
-
-def chunked_sample_queries(n, max_samples, random_state, chunk_size):
-    """:func:`~skpcd.segmentation._dbscan.sample_queries`, the same draw,
-    with the ``n`` random keys drawn ``chunk_size`` at a time: the
-    ``max_samples`` smallest keys so far are kept (with the rank of their
-    point) and merged with each new chunk, so memory holds a chunk and the
-    sample, not a key and a rank per non-ground point of the scan. A
-    :class:`numpy.random.RandomState` draws the same keys in chunks as at
-    once; equal keys at the cut (two of ``n`` 53-bit uniforms equal, and at
-    the rank of the ``max_samples``-th) are the one case where the two
-    could keep different points.
-
-    Parameters
-    ----------
-    n : int
-        Points to draw from.
-    max_samples : int or None
-        Points drawn (all ``n`` when None or not fewer than ``n``).
-    random_state : int, RandomState instance or None
-        As :func:`~skpcd.segmentation._dbscan.sample_queries`.
-    chunk_size : int
-        Keys drawn at a time.
-
-    Returns
-    -------
-    ranks : ndarray of shape (n_samples,), dtype int64
-        The ranks drawn, sorted.
-    """
-    if max_samples is None or n <= max_samples:
-        return sample_queries(n, max_samples, random_state)
-    rng = check_random_state(random_state)
-    return np.sort(stable_draw(n, int(max_samples), rng, chunk=chunk_size))
-
-
-def _estimate_eps(
-    scene, tiles, ground, min_samples, eps_scale, random_state, n_jobs,
-    chunk_size,
-):  # fmt: skip
-    """The eps of :class:`AutoEpsDBSCAN` for the non-ground points of the
-    whole scan, computed tile by tile: the same random sample of query points
-    as the untiled estimate (drawn among all non-ground points, in scan
-    order), their nearest neighbours searched among the non-ground points of
-    their buffered tile, which holds all of them when the k-th neighbour is
-    nearer than the edge of the tile's area; for the other queries (isolated
-    points), among the points of every tile within that distance
-    (:func:`_eps_far_queries`). The distances are those of the untiled
-    search, so is the estimate."""
-    is_ground = ground[0]
-    est = AutoEpsDBSCAN(
-        min_samples=min_samples, eps_scale=eps_scale, random_state=random_state
-    )
-    n = 0
-    for start in range(0, scene.n_points, chunk_size):
-        n += int((~is_ground[start : start + chunk_size]).sum())
-    if n < 2:
-        return 0.0
-    k_max = min(int(est.n_neighbors), n - 1)
-    ranks = chunked_sample_queries(n, est.max_samples, random_state, chunk_size)
-    # scan index of each query: its rank among the non-ground points
-    queries, seen = [], 0
-    for start in range(0, scene.n_points, chunk_size):
-        rest = np.flatnonzero(~is_ground[start : start + chunk_size])
-        lo, hi = np.searchsorted(ranks, [seen, seen + len(rest)])
-        queries.append(rest[ranks[lo:hi] - seen] + start)
-        seen += len(rest)
-    queries = np.concatenate(queries)
-    dist = np.empty((len(queries), k_max + 1))
-    far_rows, far_xyz, far_bounds = [], [], []
-    for index, (d, exact, xyz) in map_tiles(
-        scene, tiles, _eps_prepare, (scene.grid, queries), _eps_tile,
-        (k_max + 1,), n_jobs, ground=ground,
-    ):  # fmt: skip
-        if len(index):
-            rows = np.searchsorted(queries, index)
-            dist[rows] = d
-            far_rows.append(rows[~exact])
-            far_xyz.append(xyz)
-            far_bounds.append(d[~exact, -1])
-    if far_rows and sum(map(len, far_rows)):
-        # isolated queries: their neighbours searched in every tile near
-        rows = np.concatenate(far_rows)
-        dist[rows] = _eps_far_queries(
-            scene, tiles, ground, np.concatenate(far_xyz),
-            np.concatenate(far_bounds), k_max + 1, n_jobs,
-        )  # fmt: skip
-    mean = kdist_mean(dist[:, 1:])
-    _, _, knee_distance = fit_knee(np.arange(1, k_max + 1), mean, est.degree)
-    # as AutoEpsDBSCAN._estimate (test_tiling checks the two estimates agree)
-    return eps_from_knee(knee_distance, est.eps_scale)
-
-
 def segment_tiled(
     source,
     *,
@@ -744,11 +371,11 @@ def segment_tiled(
         # filter on the cells of its core square grown by the filter's
         # reach, cut from the raster of the whole scene
         if given_ground is not None:
-            _fill_given(is_ground, given_ground)
+            fill_given(is_ground, given_ground)
         elif ground is not None and ground.method == "csf":
-            bounds = _csf_tiled(scene, tiles, ground, is_ground, n_jobs)
+            bounds = csf_tiled(scene, tiles, ground, is_ground, n_jobs)
             if ground.keep_bases:
-                _bases_tiled(
+                bases_tiled(
                     scene, tiles, bounds, ground_buffer, ground_flags, out, n_jobs,
                     chunk_size,
                 )  # fmt: skip
@@ -757,14 +384,14 @@ def segment_tiled(
             lo = scene.mins[:2]
             nxy = (np.floor((scene.maxs[:2] - lo) / cell) + 1).astype(np.int64)
             for index, flags in map_tiles(
-                scene, tiles, _ground_prepare, (grid, lo, nxy, cell, ground_buffer),
-                _ground_tile, (ground,), n_jobs,
+                scene, tiles, ground_prepare, (grid, lo, nxy, cell, ground_buffer),
+                ground_tile, (ground,), n_jobs,
             ):  # fmt: skip
                 is_ground[index] = flags
 
-        # 2. eps, once for the whole scan (see _estimate_eps)
+        # 2. eps, once for the whole scan (see estimate_tiled_eps)
         if eps is None:
-            eps = _estimate_eps(
+            eps = estimate_tiled_eps(
                 scene, tiles, ground_flags, min_samples, eps_scale,
                 random_state, n_jobs, chunk_size,
             )  # fmt: skip
