@@ -19,12 +19,7 @@ import itertools
 
 import numpy as np
 
-from skpcd.datasets._street._catalogue import (
-    BUILDERS,
-    OBJECT_CLASSES,
-    building,
-    wire,
-)
+from skpcd.datasets._street._catalogue import BUILDERS, OBJECT_CLASSES
 from skpcd.datasets._street._primitives import (
     Parts,
     SceneArrays,
@@ -33,6 +28,7 @@ from skpcd.datasets._street._primitives import (
     rot_y,
     rot_z,
 )
+from skpcd.datasets._street._scenery import building, wire
 
 __all__ = ["STREET_CLASSES", "Street", "build_scene", "furnish"]
 
