@@ -269,7 +269,8 @@ def _worker_open3d(spec, clouds):
 def _worker_profile(spec, clouds):
     """skpcd's stages, timed one by one the way the transformers chain them."""
     from skpcd.features import FPFHTransformer, PFHTransformer
-    from skpcd.features._pfh import _fpfh_packed, _pfh_packed
+    from skpcd.features._fpfh import _fpfh_packed
+    from skpcd.features._pfh import _pfh_packed
     from skpcd.neighbors._neighbors import search_packed
     from skpcd.preprocessing._normals import normals_f32, pack_neighborhoods
     from skpcd.utils import check_point_clouds

@@ -54,30 +54,31 @@ def _rss_mib():
 
 
 def _patch(variant):
-    import skpcd.features._pfh as pfh
+    import skpcd.features._fpfh as fpfh
+    import skpcd.features._local_descriptor as local
     import skpcd.utils._memory as memory
 
     if variant == "no malloc_trim":
-        for mod in (memory, pfh):
+        for mod in (memory, local, fpfh):
             mod.release_free_memory = lambda: None
     elif variant == "no own map":
-        pfh.unshared_zeros = np.zeros
+        fpfh.unshared_zeros = local.unshared_zeros = np.zeros
     elif variant == "normals kept":
         kept = []
-        pair_stage = pfh.FPFHTransformer._pair_stage
+        pair_stage = fpfh.FPFHTransformer._pair_stage
 
         def keeping(self, p, n, *args):
             kept.append(n)
             return pair_stage(self, p, n, *args)
 
-        def final(self, *args, _final=pfh.FPFHTransformer._final_stage):
+        def final(self, *args, _final=fpfh.FPFHTransformer._final_stage):
             try:
                 return _final(self, *args)
             finally:
                 kept.clear()
 
-        pfh.FPFHTransformer._pair_stage = keeping
-        pfh.FPFHTransformer._final_stage = final
+        fpfh.FPFHTransformer._pair_stage = keeping
+        fpfh.FPFHTransformer._final_stage = final
 
 
 def worker(spec):

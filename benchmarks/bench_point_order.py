@@ -89,7 +89,7 @@ def peaks(threads):
 
 
 def run(repeat, threads):
-    import skpcd.features._pfh as pfh_module
+    import skpcd.features._local_descriptor as pfh_module
     from skpcd.features import (
         FPFHTransformer,
         ImprovedPFHTransformer,

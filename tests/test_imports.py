@@ -140,3 +140,16 @@ def test_the_rule_sees_a_private_name_from_another_package(tmp_path):
         "skpcd/cli/_x:1 skpcd.io._f._hidden",
         "skpcd/cli/_x:2 skpcd._interrupts",
     ]
+
+
+def test_modules_are_rooms_of_a_reasonable_size():
+    # a module over 800 lines holds two things; a command's module over 450
+    # lines, more than its command (the supervision of the process, a second
+    # command): split them where they hold two things
+    too_long = []
+    for path in sorted(ROOT.rglob("*.py")):
+        limit = 450 if "cli" in path.relative_to(ROOT).parts else 800
+        n = len(path.read_text().splitlines())
+        if n > limit:
+            too_long.append(f"{path.relative_to(ROOT.parent)}: {n} > {limit}")
+    assert too_long == []

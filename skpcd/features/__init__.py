@@ -1,13 +1,9 @@
 """Descriptors of segments and points."""
 
+from skpcd.features._fpfh import FPFHTransformer, compute_fpfh
 from skpcd.features._improved import ImprovedPFHTransformer
 from skpcd.features._overall import OverallDescriptor, box_dimensions
-from skpcd.features._pfh import (
-    FPFHTransformer,
-    PFHTransformer,
-    compute_fpfh,
-    compute_pfh,
-)
+from skpcd.features._pfh import PFHTransformer, compute_pfh
 from skpcd.features._shape import ShapeFeatures, shape_features
 from skpcd.features._vertical import VerticalProfile, vertical_features
 

@@ -2,7 +2,7 @@
 
 One segment at a time: its middle point and farthest point give the
 feature-level normal, and every point's pair with that normal is binned
-with the pair features and bins of :mod:`skpcd.features._pfh_kernels`
+with the pair features and bins of :mod:`skpcd.features._pair_kernels`
 (PCL's, bit for bit).
 """
 
@@ -11,7 +11,7 @@ import math
 import numpy as np
 from numba import njit
 
-from skpcd.features._pfh_kernels import F0, _bin_cosine, _bin_theta, _pair
+from skpcd.features._pair_kernels import F0, _bin_cosine, _bin_theta, _pair
 
 __all__ = ["improved_rows"]
 

@@ -62,12 +62,7 @@ def _decompress_kernel(src, dst, where):
             length = ctrl + 1
             if ip + length > n_in:
                 return _TRUNCATED
-            if op + length > n_out:
-                return _OVERFLOW
-            for k in range(length):
-                dst[op + k] = src[ip + k]
-            ip += length
-            op += length
+            ref = -1  # not read: a literal run copies from src
         else:
             length = ctrl >> 5
             if length == 7:
@@ -82,11 +77,17 @@ def _decompress_kernel(src, dst, where):
             length += 2
             if ref < 0:
                 return _BEFORE_START
-            if op + length > n_out:
-                return _OVERFLOW
+        # both kinds of chunk: room in the output, then the copy
+        if op + length > n_out:
+            return _OVERFLOW
+        if ctrl < 32:
+            for k in range(length):
+                dst[op + k] = src[ip + k]
+            ip += length
+        else:
             for k in range(length):
                 dst[op + k] = dst[ref + k]
-            op += length
+        op += length
     return op
 
 

@@ -55,6 +55,8 @@ STAGES = {
     "skpcd.datasets._street._raycast": "street simulator",
     "skpcd.features._improved_kernels": "improved PFH",
     "skpcd.features._pfh_kernels": "PFH/FPFH",
+    "skpcd.features._fpfh_kernels": "PFH/FPFH",
+    "skpcd.features._pair_kernels": "PFH/FPFH",
     "skpcd.features._vertical_kernels": "vertical profile",
     "skpcd.io._lzf": "PCD reading",
     "skpcd.io._ply": "PLY reading",

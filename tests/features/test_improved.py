@@ -9,7 +9,7 @@ from sklearn.pipeline import make_pipeline
 
 from skpcd.datasets import make_primitives
 from skpcd.features import ImprovedPFHTransformer, OverallDescriptor, PFHTransformer
-from skpcd.features._pfh_kernels import pair_features
+from skpcd.features._pair_kernels import pair_features
 
 
 def _reference(points, normals, pm, n_bins=5):

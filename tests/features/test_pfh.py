@@ -5,7 +5,7 @@ from hypothesis import strategies as st
 
 from skpcd.datasets import make_point_clouds
 from skpcd.features import FPFHTransformer, PFHTransformer, compute_fpfh, compute_pfh
-from skpcd.features._pfh_kernels import pair_features
+from skpcd.features._pair_kernels import pair_features
 from skpcd.preprocessing import compute_neighborhoods, estimate_normals
 
 F = np.float32
@@ -134,7 +134,7 @@ def test_nan_normals_go_to_bin_zero_and_lone_points_are_zero():
 def test_fpfh_conventions_follow_their_definitions():
     pts, normals = _cloud(3, 150)
     nb = compute_neighborhoods(pts, n_neighbors=10)
-    from skpcd.features._pfh import _spfh
+    from skpcd.features._fpfh import _spfh
 
     s = _spfh(pts, normals, nb, 11)
     pcl = compute_fpfh(pts, normals, neighborhoods=nb)
@@ -242,7 +242,7 @@ def test_invariant_to_rigid_motion_and_point_order(seed):
 def test_fast_theta_bin_equals_atan2f_bin():
     from numba import njit
 
-    from skpcd.features._pfh_kernels import _bin_angle, _bin_theta
+    from skpcd.features._pair_kernels import _bin_angle, _bin_theta
 
     @njit
     def both(fy, fx, n_bins):
@@ -283,13 +283,10 @@ def test_simd_kernels_equal_the_scalar_pair_path():
     # neighbourhoods side by side, large ones one point at a time)
     from numba import njit
 
-    from skpcd.features._pfh import (
-        _fpfh_from_counts,
-        _radius_of,
-        _space_order,
-        _spfh_counts,
-    )
-    from skpcd.features._pfh_kernels import ROW_MIN, _exact_code, pfh_rows_reuse
+    from skpcd.features._fpfh import _fpfh_from_counts, _spfh_counts
+    from skpcd.features._pair_kernels import ROW_MIN, _exact_code
+    from skpcd.features._pfh import _radius_of, _space_order
+    from skpcd.features._pfh_kernels import pfh_rows_reuse
 
     @njit
     def scalar(p, n, indptr, indices, n_bins, pfh, spfh):
@@ -395,6 +392,7 @@ def test_radius_pfh_in_blocks_equals_one_pass(monkeypatch, normals):
     # the radius PFHTransformer searches and bins block by block (memory);
     # every row must be the one-pass result, whatever the blocks
     import skpcd.features._pfh as mod
+    from skpcd.features._local_descriptor import _LocalDescriptor
 
     rng = np.random.default_rng(3)
     clouds = []
@@ -412,7 +410,7 @@ def test_radius_pfh_in_blocks_equals_one_pass(monkeypatch, normals):
         est = PFHTransformer(radius=0.45, normals=normals, undefined=undefined)
         got = est.fit_transform(clouds)
         with monkeypatch.context() as m:  # one search, one kernel call
-            m.setattr(PFHTransformer, "_compute", mod._LocalDescriptor._compute)
+            m.setattr(PFHTransformer, "_compute", _LocalDescriptor._compute)
             ref = est.fit_transform(clouds)
         assert len(got) == len(ref)
         for a, b in zip(got, ref, strict=True):
@@ -435,19 +433,19 @@ def test_radius_pfh_in_blocks_equals_one_pass(monkeypatch, normals):
 def test_pooled_parts_give_the_pooled_rows_of_all_points(est, pooling, monkeypatch):
     from sklearn.base import clone
 
-    from skpcd.features import _pfh
-    from skpcd.features._pfh import _pool
+    from skpcd.features import _local_descriptor
+    from skpcd.features._local_descriptor import _pool
 
     est = clone(est)
     X = make_point_clouds(9, n_points=300, random_state=3)
     X[4] = X[4][:2]  # undefined descriptors: NaN rows, left out of the pool
     rows = est.set_params(undefined="nan").fit_transform(X)
     expected = np.vstack([_pool(r, pooling) for r in rows])
-    monkeypatch.setattr(_pfh, "_POOLED_PART", 700)  # parts of 1-3 clouds
+    monkeypatch.setattr(_local_descriptor, "_POOLED_PART", 700)  # parts of 1-3 clouds
     pooled = est.set_params(pooling=pooling).fit_transform(X)
     np.testing.assert_array_equal(pooled, expected)
     whole = est.set_params(pooling=pooling).fit_transform([np.vstack(X)])
-    monkeypatch.setattr(_pfh, "_POOLED_PART", 10**9)  # one part
+    monkeypatch.setattr(_local_descriptor, "_POOLED_PART", 10**9)  # one part
     np.testing.assert_array_equal(est.fit_transform(X), expected)
     np.testing.assert_array_equal(est.fit_transform([np.vstack(X)]), whole)
 
@@ -456,7 +454,7 @@ def test_pooled_parts_give_the_pooled_rows_of_all_points(est, pooling, monkeypat
 def test_fpfh_of_a_shuffled_cloud_in_grid_order_is_the_same(convention, monkeypatch):
     # a shuffled cloud is computed renumbered in grid order (its neighbours
     # far apart in memory): the same bits as in its own order
-    from skpcd.features._pfh import _LocalDescriptor
+    from skpcd.features._local_descriptor import _LocalDescriptor
     from skpcd.neighbors._neighbors import _NEAR, scattered, search_packed
 
     rng = np.random.default_rng(7)

@@ -26,6 +26,7 @@ from skpcd.exceptions import (
     UntrustedModelError,
 )
 from skpcd.io import _model as m
+from skpcd.io import _model_checks as checks
 from skpcd.io import load_model, save_model
 
 
@@ -739,9 +740,9 @@ def test_trusted_estimators_are_those_of_all_estimators():
         for _, c in inspect.getmembers(module, inspect.isclass)
     }
     assert len(classes) > 500 and listed <= classes
-    assert {n for n in classes if m._sklearn_estimator(n)} == listed
+    assert {n for n in classes if checks._sklearn_estimator(n)} == listed
     for name in ("os.system", "sklearn.base.clone", "sklearn.foo.Bar", "sklearn."):
-        assert not m._sklearn_estimator(name)
+        assert not checks._sklearn_estimator(name)
 
 
 def test_street_model_loads_as_skops_builds_it():
