@@ -294,3 +294,19 @@ def test_truncated_and_corrupt_points(tmp_path):
     path = _patched(tmp_path, {at: b"\xff" * 40})
     with pytest.raises(PointCloudFileError, match="outside its cube"):
         spill.tile_scene(path, 700.0)
+
+
+def test_a_copc_scan_not_in_metres_is_spilled_and_gives_the_in_memory_result():
+    # the scaling page: with unit != 1 the octree is not used, the file is
+    # spilled as any LAZ file, coordinates scaled as they are read
+    kwargs = dict(SETTINGS["dbscan"], structures=False, unit=0.5)
+    kwargs["eps"] = 120.0  # in the file's units: 60 after scaling
+    tiled = segment_scene(COPC, tile_size=1400.0, **kwargs)
+    whole = segment_scene(read_point_cloud(COPC), **kwargs)
+    assert tiled.labels.max() >= 0
+    assert np.array_equal(tiled.labels, whole.labels)
+    assert tiled.eps == whole.eps == 120.0 and tiled.unit == 0.5
+    metres = segment_scene(
+        read_point_cloud(COPC) * 0.5, **dict(kwargs, unit=1.0, eps=60.0)
+    )
+    assert np.array_equal(whole.labels, metres.labels)

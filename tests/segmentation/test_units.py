@@ -50,6 +50,8 @@ def test_a_scan_in_feet_is_segmented_in_metres():
     assert np.array_equal(auto.labels, metres.labels)
     assert np.array_equal(auto.ground, metres.ground)
     assert auto.eps == pytest.approx(metres.eps / 0.3048)
+    # the segmentation page's figure: 4.9 m (16.2 ft)
+    assert round(auto.eps * 0.3048, 1) == 4.9 and round(auto.eps, 1) == 16.2
     # the same array, said to be in feet, gives the same answer
     feet = segment_scene(xyz, unit=0.3048, n_jobs=2)
     assert np.array_equal(feet.labels, auto.labels) and feet.eps == auto.eps
