@@ -1,6 +1,7 @@
 """``skpcd identify``: segment a scene as ``skpcd segment`` does, predict the
 class of each segment and write the scene back with the class of every
-point, and the legend of its codes beside it."""
+point, and the legend of its codes beside it. Several scenes, or a folder
+of them, stream through one loaded model: :mod:`skpcd.cli._sweeps`."""
 
 import csv
 from contextlib import ExitStack
@@ -24,6 +25,7 @@ from skpcd.cli._inventory import (
 )
 from skpcd.cli._segment import (
     add_segmentation_options,
+    check_method,
     is_las,
     segment_clouds,
     segment_file,
@@ -44,16 +46,37 @@ def add_parser(sub):
         "LAS/LAZ keeps every point and dimension; ground points get "
         "classification 2, class is 64 + the class index (0: none) and the "
         "class names are stored in the file; in other formats class is the "
-        "index (-1: none). Class names also go to OUTPUT.classes.csv.",
+        "index (-1: none). Class names also go to OUTPUT.classes.csv. "
+        "Several scenes, or a folder (its point-cloud files, by name), are "
+        "identified one after the other with the model loaded once (sweeps "
+        "of a spinning sensor: --method range-image, tens of ms a sweep): "
+        "-o is then a folder, created if missing, which gets each scene "
+        "under its own file name (same format, a LAS/LAZ with every "
+        "dimension) and its .classes.csv; no output may replace an input, "
+        "the folder may not be an input's, nor two scenes share a name, and "
+        "without --overwrite no output may exist (all checked before the "
+        "first scene). An interrupt, or a scene that cannot be read "
+        "(stopping there with an error naming it), leaves the scenes done "
+        "before written whole and nothing of the one under way.",
     )
-    ident.add_argument("scene", help="a point-cloud file")
+    ident.add_argument(
+        "scene",
+        nargs="+",
+        metavar="SCENE",
+        help="a point-cloud file; or several, or a folder of them (then -o "
+        "names a folder)",
+    )
     ident.add_argument(
         "--model",
         help="a model written by skpcd fit (default: the shipped street model, "
         "fitted on simulated streets)",
     )
     ident.add_argument(
-        "-o", "--output", required=True, help="labelled scene (.las .laz .ply .pcd...)"
+        "-o",
+        "--output",
+        required=True,
+        help="labelled scene (.las .laz .ply .pcd...); with several scenes or "
+        "a folder, the output folder",
     )
     add_inventory_option(ident)
     ident.add_argument(
@@ -100,19 +123,45 @@ def write_legend(path, classes, seg_class, seg_sizes, n_points, *, las, into):
 
 
 def run_identify(args):
+    from skpcd.cli._sweeps import is_several, run_sweeps
+
+    check_method(args, "identify")
+    if isinstance(args.scene, str):  # one scene, as a caller may give it
+        args.scene = [args.scene]
+    if is_several(args.scene):
+        return run_sweeps(args)
+    args.scene = args.scene[0]
+    inputs = [args.scene] + ([args.model] if args.model else [])
+    out = check_output(args.output, args, "identify", inputs=inputs)
+    legend = check_output(
+        side_file(out, "classes.csv"), args, "identify", inputs=inputs
+    )
+    inventory = check_inventory(args, "identify", inputs)
+    model = load_model_for(args, "identify")
+    pred, kind, _ = identify_scene(args, model, out, legend, inventory)
+    if not args.quiet:
+        print(f"classes   {unique_counts(pred) or 'none'}")
+        print(
+            f"written   {out} (fields segment, class, ground"
+            + (f", {kind}" if kind else "")
+            + f"); class names in {legend.name}"
+        )
+    return 0
+
+
+def identify_scene(args, model, out, legend, inventory=None):
+    """Segment ``args.scene``, classify its segments with ``model`` and
+    write the labelled scene to ``out``, the legend to ``legend`` (and the
+    inventory), each atomically; returns ``(pred, kind, result)``: the
+    class of each segment, the name of the score field (or None) and the
+    segmentation."""
     from skpcd.classification import identify_segments
     from skpcd.io import write_labelled_scan
     from skpcd.io._atomic import atomic_path, scratch_folder
     from skpcd.segmentation._members import spread_to_points
     from skpcd.utils._progress import stage
 
-    inputs = [args.scene] + ([args.model] if args.model else [])
-    out = check_output(args.output, args, "identify", inputs=inputs)
-    legend = check_output(
-        side_file(out, "classes.csv"), args, "identify", inputs=inputs
-    )
-    inventory, geometries = check_inventory(args, "identify", inputs), []
-    model = load_model_for(args, "identify")
+    geometries = []
     points, _, result = segment_file(args, "identify")
     n_points = len(result.labels)
     with ExitStack() as stack:
@@ -174,11 +223,4 @@ def run_identify(args):
             write_inventory_of(
                 args, inventory, geometries, pred, seg_score, points, result
             )
-    if not args.quiet:
-        print(f"classes   {unique_counts(pred) or 'none'}")
-        print(
-            f"written   {out} (fields segment, class, ground"
-            + (f", {kind}" if kind else "")
-            + f"); class names in {legend.name}"
-        )
-    return 0
+    return pred, kind, result

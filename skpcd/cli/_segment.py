@@ -20,6 +20,7 @@ KINDS = ("object", "facade", "wire")
 # loads no library: ``skpcd --help`` imports neither scikit-learn nor numba.
 GROUND_CHOICES = ("auto", "street", "csf", "aerial", "mobile", "from-file", "none")
 SEGMENT_FORMATS = ("ply", "pcd", "las", "laz", "xyz", "txt", "csv", "npy")
+METHODS = ("dbscan", "euclidean", "range-image")
 
 
 def add_segmentation_options(p):
@@ -50,7 +51,8 @@ def add_segmentation_options(p):
         metavar=("X", "Y", "Z"),
         default=None,
         help="position of the sensor of a single sweep, if known (helps "
-        "--ground auto tell a robot from a car)",
+        "--ground auto tell a robot from a car; with --method range-image, "
+        "where the rays start, default the origin)",
     )
     p.add_argument(
         "--no-structures",
@@ -61,16 +63,24 @@ def add_segmentation_options(p):
     )
     p.add_argument(
         "--method",
-        choices=("dbscan", "euclidean"),
+        choices=METHODS,
         default="dbscan",
         help="dbscan: AutoEpsDBSCAN, eps from the data unless --eps; euclidean: "
-        "EuclideanClusters, eps 0.2 unless --eps (default dbscan)",
+        "EuclideanClusters, eps 0.2 unless --eps; range-image: one sweep of a "
+        "spinning sensor cut in its range image (rings by azimuth columns; "
+        "the rings of a ring or scanner_channel field when the file has one), "
+        "fast (tens of ms a sweep): with --ground auto the ground is walked "
+        "along the image's columns, and neighbouring pixels are joined by the "
+        "angle between them; the sweep must be in its sensor's frame, or "
+        "--sensor X Y Z given; --eps, --eps-scale, --min-samples and "
+        "--no-structures do not apply, and --tile-size is refused "
+        "(default dbscan)",
     )
     p.add_argument(
         "--eps",
         type=float,
         default=None,
-        help="clustering radius, in the units of the coordinates",
+        help="clustering radius, in the units of the coordinates (dbscan, euclidean)",
     )
     p.add_argument(
         "--unit",
@@ -112,7 +122,7 @@ def add_segmentation_options(p):
         "LAS/LAZ input, so that memory is bounded by the tile, not the scene; "
         "same ground and segments as without, except with the structures step "
         "(facades, wires, trunk splitting), whose segments agree up to a "
-        "bound (see the user guide)",
+        "bound (see the user guide); not with --method range-image",
     )
     p.add_argument(
         "--tile-buffer",
@@ -195,10 +205,10 @@ def segment_file(args, command, fields=None):
     it tile by tile): ``points`` is None and ``extras`` empty. Otherwise
     ``result`` covers every point of the file (non-finite ones: no segment,
     not ground), in file order."""
-    from skpcd.io import read_point_cloud
     from skpcd.segmentation import segment_scene
     from skpcd.utils._progress import stage
 
+    check_method(args, command)
     tiled = args.tile_size is not None
     unit = _unit_of(args)
     finite = None
@@ -212,10 +222,11 @@ def segment_file(args, command, fields=None):
     else:
         want = "all" if fields or args.ground == "from-file" else None
         with stage(f"reading {Path(args.scene).name}"):
-            read = read_point_cloud(args.scene, fields=want, nonfinite="keep")
-        points, extras = read if want else (read, {})
+            points, extras, rings = _read_scene(args, want)
         finite = np.isfinite(points).all(axis=1)
         source = points if finite.all() else points[finite]
+        if rings and finite.all():  # segment_scene reads them from the file
+            source = args.scene
         if args.ground == "from-file":  # the flags of the points read
             ground = ground.flags_of(args.scene, extras)[finite]
             extras = extras if fields else {}
@@ -265,9 +276,11 @@ def segment_file(args, command, fields=None):
             f"scene     {args.scene}: {len(labels)} points, "
             f"{int(result.ground.sum())} ground"
         )
+        eps = _finite(result.eps)  # None: no radius (range-image)
+        metres = f" = {eps * result.unit:.3f} m" if eps and result.unit != 1 else ""
         print(
-            f"segments  {result.n_segments} ({args.method}, eps {result.eps:.3f}"
-            + (f" = {result.eps * result.unit:.3f} m" if result.unit != 1.0 else "")
+            f"segments  {result.n_segments} ({args.method}"
+            + ("" if eps is None else f", eps {eps:.3f}{metres}")
             + "); "
             f"{int(((labels < 0) & ~result.ground).sum())} points in none "
             f"({time.perf_counter() - start:.1f} s)"
@@ -279,6 +292,39 @@ def segment_file(args, command, fields=None):
                 + ", ".join(f"{int((kinds == k).sum())} {k}" for k in KINDS)
             )
     return points, extras, result
+
+
+def check_method(args, command):
+    """Refuse, before any work, options that --method does not take."""
+    if args.method == "range-image" and args.tile_size is not None:
+        raise CommandError(
+            command,
+            "--method range-image segments one sweep in memory; it does not "
+            "take --tile-size",
+        )
+
+
+def _read_scene(args, want):
+    """``(points, extras, rings)`` of SCENE, non-finite points kept;
+    ``rings``: with --method range-image, whether the file has a field of
+    rings (as segment_scene reads them: at least 4 values)."""
+    from skpcd.io._api import read_fields
+    from skpcd.segmentation._scene import RING_FIELDS
+
+    if args.method != "range-image":
+        read = read_fields(args.scene, want, nonfinite="keep")
+        return (*(read if want else (read, {})), False)
+    points, extras = read_fields(
+        args.scene, want, nonfinite="keep", optional=[RING_FIELDS]
+    )
+    rings = [extras[n] for n in RING_FIELDS if n in extras][:1]
+    rings = bool(rings) and len(np.unique(rings[0])) >= 4
+    return points, extras if want else {}, rings
+
+
+def _finite(value):
+    """``value``, or None when it is NaN (no radius: JSON has no NaN)."""
+    return None if value is None or np.isnan(value) else float(value)
 
 
 def _unit_of(args):
@@ -328,7 +374,7 @@ def _metadata(args, result):
         "scan": None if scan is None else {k: getattr(scan, k) for k in scan._fields},
         "ground": args.ground if result.ground_filter is None else result.ground_filter,
         "method": args.method,
-        "eps": result.eps,
+        "eps": _finite(result.eps),
         "eps_given": args.eps is not None,
         "unit_metres": result.unit,
         "structures": bool(args.structures),

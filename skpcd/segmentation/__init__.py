@@ -17,6 +17,7 @@ import importlib
 from skpcd.segmentation._clusters import EuclideanClusters, euclidean_clusters
 from skpcd.segmentation._dbscan import AutoEpsDBSCAN, estimate_eps
 from skpcd.segmentation._eps_plot import plot_eps_curve
+from skpcd.segmentation._range_image import RangeImage, range_image
 from skpcd.segmentation._result import SceneSegmentation
 from skpcd.segmentation._scan_kind import (
     SCAN_KINDS,
@@ -26,6 +27,7 @@ from skpcd.segmentation._scan_kind import (
 )
 from skpcd.segmentation._scene import segment_scene
 from skpcd.segmentation._structures import STRUCTURE_DEFAULTS
+from skpcd.segmentation._sweeps import SWEEP_DEFAULTS, SweepSegmenter, segment_sweep
 from skpcd.segmentation.ground import GROUND_PRESETS, GroundFilter
 from skpcd.segmentation.tiling import TiledScene, TileGrid, tile_scene
 
@@ -33,11 +35,14 @@ __all__ = [
     "GROUND_PRESETS",
     "SCAN_KINDS",
     "STRUCTURE_DEFAULTS",
+    "SWEEP_DEFAULTS",
     "AutoEpsDBSCAN",
     "EuclideanClusters",
     "GroundFilter",
+    "RangeImage",
     "ScanKind",
     "SceneSegmentation",
+    "SweepSegmenter",
     "TileGrid",
     "TiledScene",
     "describe_scan",
@@ -45,7 +50,9 @@ __all__ = [
     "euclidean_clusters",
     "make_scene",
     "plot_eps_curve",
+    "range_image",
     "segment_scene",
+    "segment_sweep",
     "sweep_coordinates",
     "tile_scene",
 ]

@@ -13,6 +13,7 @@ from sklearn.utils._param_validation import (
 )
 
 from skpcd.io import iter_points, linear_unit, read_las_extent, read_point_cloud
+from skpcd.io._api import read_fields
 from skpcd.preprocessing import (
     RadiusOutlierFilter,
     StatisticalOutlierFilter,
@@ -24,6 +25,7 @@ from skpcd.segmentation._scene_clusters import cluster_rest
 from skpcd.segmentation._structures import (
     STRUCTURE_DEFAULTS,
 )
+from skpcd.segmentation._sweeps import segment_sweep
 from skpcd.segmentation.ground import GROUND_PRESETS, GroundFilter
 from skpcd.segmentation.ground._classified import (
     FROM_FILE,
@@ -49,7 +51,7 @@ __all__ = ["segment_scene"]
             None,
         ],
         "sensor": ["array-like", None],
-        "method": [StrOptions({"dbscan", "euclidean"})],
+        "method": [StrOptions({"dbscan", "euclidean", "range-image"})],
         "eps": [Interval(Real, 0, None, closed="neither"), None],
         "eps_scale": [Interval(Real, 0, None, closed="neither")],
         "min_samples": [Interval(Integral, 1, None, closed="left")],
@@ -131,11 +133,18 @@ def segment_scene(
         point, gives the ground points outright.
     sensor : array-like of shape (3,) or None, default=None
         With ``ground="auto"``, the position of the sensor of a single
-        sweep if known (see :func:`describe_scan`).
-    method : {"dbscan", "euclidean"}, default="dbscan"
+        sweep if known (see :func:`describe_scan`); with
+        ``method="range-image"``, where the rays start (None: the origin).
+    method : {"dbscan", "euclidean", "range-image"}, default="dbscan"
         :class:`AutoEpsDBSCAN` (eps estimated from the non-ground points
-        unless given) or :class:`EuclideanClusters` (every point core; eps
-        0.2 unless given).
+        unless given), :class:`EuclideanClusters` (every point core; eps
+        0.2 unless given), or, for one sweep of a spinning sensor in its
+        sensor's frame (or ``sensor`` given), the segmentation in its range
+        image, :func:`segment_sweep` (ground="auto" walks the ground along
+        the image's columns; the rings are those of a file's ``ring`` or
+        ``scanner_channel`` field when it has one; ``eps``, ``eps_scale``,
+        ``min_samples`` and ``structures`` do not apply; not with
+        ``tile_size``).
     eps : float or None, default=None
         Clustering radius; see ``method``. An automatic radius that joins
         a segment covering more than half of the scene's horizontal
@@ -343,6 +352,11 @@ def segment_scene(
     ['object', 'object']
     """
     _check_options(denoise, tile_size, structures)
+    if method == "range-image" and tile_size is not None:
+        raise ValueError(
+            "method='range-image' segments one sweep in memory; it is not "
+            "available with tile_size"
+        )
     unit = resolve_unit(unit, points)
     if unit != 1.0:  # every length given in metres, as the defaults
         eps = None if eps is None else eps * unit
@@ -362,22 +376,30 @@ def segment_scene(
         )  # fmt: skip
         return seg._replace(eps=seg.eps / unit, unit=unit)
     from_file = classified_ground(ground, points)
-    given = None
+    given = rings = None
     if from_file is not None:
         points, given = from_file.read(points)
+    elif isinstance(points, (str, os.PathLike)) and method == "range-image":
+        points, rings = read_rings(points)
     elif isinstance(points, (str, os.PathLike)):
         points = read_point_cloud(points)
     xyz = check_scene(points)
+    full = len(xyz)
     if unit != 1.0:
         xyz = xyz * unit
     if from_file is None:
         given = ground_flags(ground, len(xyz))
     keep = None
     if denoise is not None:
-        full = len(xyz)
         keep = _inliers(xyz, denoise, n_jobs)
         xyz = np.ascontiguousarray(xyz[keep])
         given = None if given is None else given[keep]
+        rings = None if rings is None else rings[keep]
+    if method == "range-image":
+        seg = _segment_in_image(
+            xyz, ground, (given, from_file), sensor, rings, clustering
+        )
+        return _restored(seg._replace(unit=unit), keep, full)
     scan = None
     if isinstance(ground, str) and ground == "auto":
         defaults = SCAN_KINDS["spinning"]  # too few points to tell
@@ -405,6 +427,12 @@ def segment_scene(
         ground_filter=_ground_name(ground, from_file),
         unit=unit,
     )
+    return _restored(seg, keep, full)
+
+
+def _restored(seg, keep, full):
+    """The result over all the points, the outliers of ``denoise`` (the
+    points not in ``keep``) in no segment and not ground."""
     if keep is None:
         return seg
     labels = np.full(full, -1, dtype=np.int64)
@@ -412,6 +440,42 @@ def segment_scene(
     is_ground = np.zeros(full, dtype=bool)
     is_ground[keep] = seg.ground
     return seg._replace(labels=labels, ground=is_ground)
+
+
+# Fields that hold the ring of each point in the files of spinning sensors.
+RING_FIELDS = ("ring", "scanner_channel", "laser_number", "laser_id", "channel")
+
+
+def read_rings(path):
+    """The points of a file and the ring of each, from the first of
+    ``RING_FIELDS`` it has with at least 4 values (None otherwise)."""
+    xyz, extras = read_fields(path, optional=[RING_FIELDS])
+    rings = next(iter(extras.values()), None)
+    if rings is not None and len(np.unique(rings)) < 4:
+        rings = None  # a LAS 1.4 file's scanner_channel, all 0
+    return xyz, rings
+
+
+def _segment_in_image(xyz, ground, given, sensor, rings, clustering):
+    """segment_scene with method="range-image" (see segment_sweep);
+    ``given = (flags, from_file)``, the ground flags given or read."""
+    given, from_file = given
+    if given is not None:
+        flags = given
+    elif isinstance(ground, str) and ground == "auto":
+        flags = True
+    elif ground is None:
+        flags = False
+    else:
+        flags = _ground_filter(ground, clustering["n_jobs"]).fit_predict(xyz)
+    seg = segment_sweep(
+        xyz, sensor=sensor, rings=rings, ground=flags,
+        min_cluster_size=clustering["min_cluster_size"],
+        max_cluster_size=clustering["max_cluster_size"],
+    )  # fmt: skip
+    if flags is True:
+        return seg
+    return seg._replace(ground_filter=_ground_name(ground, from_file))
 
 
 def _check_options(denoise, tile_size, structures):

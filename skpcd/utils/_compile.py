@@ -64,6 +64,7 @@ STAGES = {
     "skpcd.preprocessing._normals_kernels": "normals",
     "skpcd.preprocessing._sampling_kernels": "grid sampling",
     "skpcd.segmentation._cluster_kernels": "clustering",
+    "skpcd.segmentation._range_kernels": "range image",
     "skpcd.segmentation._structure_kernels": "structures",
     "skpcd.segmentation.ground._cloth_kernels": "ground (CSF)",
     "skpcd.segmentation.ground._raster_kernels": "ground (raster)",

@@ -1,0 +1,298 @@
+"""Segmentation of single sweeps in their range image: ground walked along
+the columns, objects joined between neighbouring pixels (segment_sweep,
+SweepSegmenter, segment_scene(method="range-image")), on simulated sweeps
+cast from a sensor and on real ones."""
+
+import csv
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from skpcd.segmentation import (
+    SWEEP_DEFAULTS,
+    SweepSegmenter,
+    range_image,
+    segment_scene,
+    segment_sweep,
+)
+
+N_BEAMS, N_AZIMUTH = 32, 1800
+# Boxes (x0, x1, y0, y1, top) on a flat road 1.8 m below the sensor.
+BOXES = [(8.0, 12.0, -1.0, 1.0, 0.0), (-9.0, -7.0, 4.0, 6.0, -0.3)]
+
+
+def cast_sweep(boxes=BOXES, sensor=(0.0, 0.0, 0.0)):
+    """A sweep of a 32-beam sensor (-25 to +5 degrees, 0.2 degree steps of
+    azimuth) at ``sensor``, 1.8 m above a flat road, ray-cast on
+    axis-aligned boxes: ``(points, rings, box index of each point (-1:
+    road))``, points rounded to 1/1024 m."""
+    az = np.tile(np.linspace(-np.pi, np.pi, N_AZIMUTH, endpoint=False), N_BEAMS)
+    el = np.repeat(np.radians(np.linspace(-25, 5, N_BEAMS)), N_AZIMUTH)
+    ray = np.column_stack(
+        [np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)]
+    )
+    rings = np.repeat(np.arange(N_BEAMS), N_AZIMUTH)
+    t = np.where(ray[:, 2] < 0, -1.8 / np.minimum(ray[:, 2], -1e-12), np.inf)
+    t[t > 80] = np.inf
+    hit = np.full(len(ray), -1)
+    for k, (x0, x1, y0, y1, top) in enumerate(boxes):
+        lo = np.array([x0, y0, -1.8])
+        hi = np.array([x1, y1, top])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a = (lo - 0.0) / ray
+            b = (hi - 0.0) / ray
+        near = np.nanmax(np.minimum(a, b), axis=1)
+        far = np.nanmin(np.maximum(a, b), axis=1)
+        inside = (near <= far) & (near > 0) & (near < t)
+        t[inside] = near[inside]
+        hit[inside] = k
+    seen = np.isfinite(t)
+    points = np.round(ray[seen] * t[seen, None] * 1024) / 1024 + np.asarray(sensor)
+    return points, rings[seen], hit[seen]
+
+
+@pytest.fixture(scope="module")
+def sweep():
+    return cast_sweep()
+
+
+def test_each_box_is_one_segment_and_the_road_is_ground(sweep):
+    points, _, hit = sweep
+    seg = segment_sweep(points, min_cluster_size=20)
+    assert seg.n_segments == 2
+    assert seg.ground[hit == -1].mean() > 0.99
+    # the walk takes the foot of an object (within its noise step and
+    # slope of the road, under 0.1 m here) for ground, nothing above it
+    foot = points[seg.ground & (hit >= 0), 2]
+    assert 0 < len(foot) < 0.1 * (hit >= 0).sum()
+    assert foot.max() < -1.8 + 0.1
+    for k in range(2):
+        labels = seg.labels[(hit == k) & ~seg.ground]
+        assert (labels >= 0).all()
+        assert len(np.unique(labels)) == 1
+    objects = [np.unique(seg.labels[(hit == k) & ~seg.ground]) for k in range(2)]
+    assert objects[0] != objects[1]
+    assert seg.ground_filter == "range-image"
+    assert np.isnan(seg.eps)
+    assert list(seg.kinds) == ["object", "object"]
+
+
+def test_rings_given_or_found_from_elevation_agree(sweep):
+    points, rings, _ = sweep
+    found = segment_sweep(points, min_cluster_size=20)
+    given_ = segment_sweep(points, rings=rings, min_cluster_size=20)
+    np.testing.assert_array_equal(found.ground, given_.ground)
+    np.testing.assert_array_equal(found.labels, given_.labels)
+    image = range_image(points, rings=rings)
+    seen = len(np.unique(rings))  # the beams above the horizon see nothing
+    assert (image.rings_from, image.n_rows, image.n_columns) == ("field", seen, 1800)
+    assert range_image(points).rings_from == "elevation"
+
+
+def test_rings_are_rows_in_order_of_elevation_whatever_their_numbers(sweep):
+    points, rings, _ = sweep
+    shuffled = np.random.default_rng(0).permutation(N_BEAMS)[rings] * 7 + 100
+    a = range_image(points, rings=rings)
+    b = range_image(points, rings=shuffled)
+    np.testing.assert_array_equal(a.row, b.row)
+    assert a.row_height == pytest.approx(30 / 31, rel=1e-3)
+
+
+def test_every_point_keeps_a_pixel_and_a_label_duplicates_and_second_returns(sweep):
+    points, _, hit = sweep
+    doubled = np.vstack([points, points, points[hit == 0] * 1.15])
+    seg = segment_sweep(doubled, min_cluster_size=20)
+    n = len(points)
+    assert len(seg.labels) == len(doubled)
+    np.testing.assert_array_equal(seg.labels[:n], seg.labels[n : 2 * n])
+    np.testing.assert_array_equal(seg.ground[:n], seg.ground[n : 2 * n])
+    image = range_image(doubled)
+    assert (image.pixel >= 0).all()
+    assert (image.pixel < image.n_rows * image.n_columns).all()
+    # the box seen again 1.2 m farther (a second return, past max_gap) is in
+    # segments of its own
+    second = seg.labels[2 * n :][~seg.ground[2 * n :]]
+    assert (second >= 0).all()
+    assert not np.isin(second, seg.labels[:n]).any()
+
+
+@settings(max_examples=15, deadline=None)
+@given(
+    st.tuples(*[st.integers(-20000, 20000)] * 2),
+    st.integers(-300, 300),
+)
+def test_the_same_sweep_anywhere_gives_the_same_segments(xy, z):
+    offset = np.array([xy[0], xy[1], z], dtype=np.float64)
+    points, rings, _ = SWEEP
+    base = segment_sweep(points, rings=rings, min_cluster_size=20)
+    moved = segment_sweep(points + offset, sensor=offset, rings=rings,
+                          min_cluster_size=20)  # fmt: skip
+    np.testing.assert_array_equal(base.labels, moved.labels)
+    np.testing.assert_array_equal(base.ground, moved.ground)
+
+
+SWEEP = cast_sweep()
+
+
+def test_a_sweep_out_of_its_sensor_frame_needs_the_sensor():
+    points, _, hit = cast_sweep(sensor=(30.0, -12.0, 4.0))
+    right = segment_sweep(points, sensor=(30.0, -12.0, 4.0), min_cluster_size=20)
+    assert right.n_segments == 2
+    assert right.ground[hit == -1].mean() > 0.99
+
+
+def test_ground_false_or_given_flags(sweep):
+    points, _, hit = sweep
+    flat = segment_sweep(points, ground=False, min_cluster_size=20)
+    assert not flat.ground.any()
+    assert flat.ground_filter is None
+    # the road, not ground now, joins the boxes standing on it
+    for k in range(2):
+        box = np.unique(flat.labels[hit == k])
+        assert len(box) == 1 and (flat.labels[hit == -1] == box[0]).sum() > 1000
+    flags = hit == -1
+    given_ = segment_sweep(points, ground=flags, min_cluster_size=20)
+    np.testing.assert_array_equal(given_.ground, flags)
+    assert given_.n_segments == 2
+    with pytest.raises(ValueError, match="ground has 3 flags for"):
+        segment_sweep(points, ground=[True, False, True])
+
+
+def test_cluster_sizes_and_parameters(sweep):
+    points = sweep[0]
+    seg = segment_sweep(points, min_cluster_size=20)
+    sizes = np.bincount(seg.labels[seg.labels >= 0])
+    small, big = min(sizes), max(sizes)
+    assert segment_sweep(points, min_cluster_size=small + 1).n_segments == 1
+    assert segment_sweep(points, max_cluster_size=big - 1).n_segments == 1
+    # a gap too small to cross: each face of a box apart
+    assert segment_sweep(points, max_gap=0.01, min_cluster_size=20).n_segments != 2
+    with pytest.raises(ValueError, match=r"unknown sweep parameter\(s\) \['thetta'\]"):
+        segment_sweep(points, thetta=5)
+    with pytest.raises(ValueError, match="'theta' parameter of segment_sweep"):
+        segment_sweep(points, theta=120)
+    with pytest.raises(ValueError, match="'column_reach' parameter"):
+        SweepSegmenter(column_reach=0.5)
+
+
+def test_two_boxes_one_behind_the_other_stay_apart():
+    # a far wall seen past the edge of a near box: joined by distance
+    # alone at 1 m, kept apart by the angle between their points
+    boxes = [(6.0, 7.0, -1.0, 0.0, 0.0), (7.5, 8.5, -0.05, 1.5, 0.2)]
+    points, _, hit = cast_sweep(boxes)
+    seg = segment_sweep(points, min_cluster_size=20)
+    first = np.unique(seg.labels[(hit == 0) & ~seg.ground])
+    second = np.unique(seg.labels[(hit == 1) & ~seg.ground])
+    assert len(first) == 1 and len(second) == 1 and first[0] != second[0]
+
+
+def test_sweep_segmenter_keeps_its_columns_and_counts_sweeps(sweep):
+    points, rings, _ = sweep
+    segmenter = SweepSegmenter(min_cluster_size=20)
+    assert (segmenter.n_columns_, segmenter.n_sweeps_) == (None, 0)
+    first = segmenter.segment(points)
+    again = segmenter.segment(points[::-1].copy(), rings=rings[::-1].copy())
+    assert (segmenter.n_columns_, segmenter.n_sweeps_) == (N_AZIMUTH, 2)
+    one = segment_sweep(points, min_cluster_size=20, n_columns=N_AZIMUTH)
+    np.testing.assert_array_equal(first.labels, one.labels)
+    assert again.n_segments == 2
+    np.testing.assert_array_equal(again.ground[::-1], first.ground)
+    with pytest.raises(ValueError, match="unknown sweep parameter"):
+        SweepSegmenter(gap=1.0)
+    assert SweepSegmenter(theta=5).params == {**SWEEP_DEFAULTS, "theta": 5}
+
+
+def test_segment_scene_method_range_image(sweep, tmp_path):
+    points = sweep[0]
+    seg = segment_scene(points, method="range-image", min_cluster_size=20)
+    direct = segment_sweep(points, min_cluster_size=20)
+    np.testing.assert_array_equal(seg.labels, direct.labels)
+    np.testing.assert_array_equal(seg.ground, direct.ground)
+    assert seg.ground_filter == "range-image"
+    # outliers removed first come back in no segment and not ground
+    noisy = np.vstack([points, [[0.0, 0.0, 40.0], [0.0, 50.0, 30.0]]])
+    seg = segment_scene(noisy, method="range-image", min_cluster_size=20,
+                        denoise="radius")  # fmt: skip
+    assert len(seg.labels) == len(noisy)
+    assert (seg.labels[-2:] == -1).all() and not seg.ground[-2:].any()
+    with pytest.raises(ValueError, match="not available with tile_size"):
+        segment_scene(points, method="range-image", tile_size=50.0)
+
+
+def test_rings_read_from_a_file(sweep, tmp_path):
+    import laspy
+
+    from skpcd.segmentation._scene import read_rings
+
+    points, rings, _ = sweep
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.scales = [0.001] * 3
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = points.T
+    las.scanner_channel = rings % 3  # 3 channels: too few to be rings
+    path = tmp_path / "sweep.las"
+    las.write(path)
+    _, found = read_rings(path)
+    assert found is None
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.scales = [0.001] * 3
+    header.add_extra_dim(laspy.ExtraBytesParams("ring", np.uint16))
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = points.T
+    las.ring = rings
+    las.write(path)
+    _, found = read_rings(path)
+    np.testing.assert_array_equal(found, rings)
+    seg = segment_scene(path, method="range-image", min_cluster_size=20)
+    assert seg.n_segments == 2
+
+
+def _core(source):
+    """The first core sweep of a source of real_labelled, by file name."""
+    from tests.conftest import REAL_LABELLED_DIR
+
+    with open(REAL_LABELLED_DIR / "scans.csv", newline="") as f:
+        rows = [r for r in csv.DictReader(f) if r["core"] == "1"]
+    return next(r["file"] for r in rows if r["kind"] == source)
+
+
+GROUND_CODES = (40, 44, 48, 49, 60, 72)
+
+
+@pytest.mark.parametrize("source", ["semantickitti", "nuscenes"])
+def test_ground_of_real_sweeps_in_their_sensor_frame(real_labelled, source):
+    import laspy
+
+    las = laspy.read(real_labelled(_core(source)))
+    xyz = np.column_stack([las.x, las.y, las.z])
+    codes = np.asarray(las.semantic)
+    seg = segment_sweep(xyz)
+    truth = np.isin(codes, GROUND_CODES)
+    valid = codes > 1
+    precision = (seg.ground & truth & valid).sum() / (seg.ground & valid).sum()
+    recall = (seg.ground & truth & valid).sum() / (truth & valid).sum()
+    assert precision > 0.93
+    assert recall > 0.85
+    # cars: most of their points in segments, few of them ground
+    car = codes == 10
+    assert seg.ground[car].mean() < 0.1
+    assert (seg.labels[car] >= 0).mean() > 0.7
+
+
+def test_boxed_objects_of_real_kitti_sweeps_kept_and_whole(real_sweeps):
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    from bench_scan_kinds import objects_score, real_mobile
+
+    scores = [
+        objects_score(segment_sweep(xyz).labels, objects)
+        for name, xyz, objects, _ in real_mobile()
+        if name.startswith("kitti")
+    ]
+    assert len(scores) >= 3
+    assert np.mean([s["kept"] for s in scores]) > 0.9
+    assert np.mean([s["purity"] for s in scores]) > 0.9
