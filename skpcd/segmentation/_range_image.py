@@ -172,11 +172,17 @@ def image_ground(xyz, image, *, z0, slope, step, max_step, column_width):
 
 
 def image_clusters(xyz, image, keep, *, theta, max_gap, reach, reach_columns):
-    """Union-find roots of the kept points (see :func:`cluster_image`)."""
+    """Union-find roots of the kept points (see :func:`cluster_image`),
+    each the index of a point of its tree; -1 for the points not kept."""
     d = xyz - image.sensor
     r = np.sqrt(np.einsum("ij,ij->i", d, d))
     start, order = pixel_order(image.pixel, r, image.n_rows * image.n_columns)
-    return cluster_image(
-        start, order, image.n_rows, image.n_columns, keep, xyz, image.sensor,
-        np.radians(theta), max_gap, reach, reach_columns,
+    parent = cluster_image(
+        start, image.n_rows, image.n_columns, keep[order],
+        np.ascontiguousarray(xyz[order]), image.sensor, np.radians(theta),
+        max_gap, reach, reach_columns,
     )  # fmt: skip
+    roots = np.full(len(xyz), -1, dtype=np.int64)
+    kept = parent >= 0
+    roots[order[kept]] = order[parent[kept]]
+    return roots

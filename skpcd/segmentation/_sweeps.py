@@ -15,6 +15,7 @@ from skpcd.segmentation._range_image import (
     image_ground,
     range_image,
 )
+from skpcd.segmentation._range_kernels import numbered_trees
 from skpcd.segmentation._result import SceneSegmentation, kind_names
 from skpcd.utils._compile import entry_point
 from skpcd.utils._validation import check_scene
@@ -201,7 +202,7 @@ def _segment_image(xyz, image, ground, min_size, max_size, p):
         reach=max(int(np.ceil(p["row_reach"] / image.row_height)), 1),
         reach_columns=p["column_reach"],
     )  # fmt: skip
-    labels = _numbered(roots, min_size, max_size)
+    labels = numbered_trees(roots, min_size, -1 if max_size is None else max_size)
     n = int(labels.max()) + 1 if len(labels) else 0
     return SceneSegmentation(
         labels, is_ground, float("nan"), kind_names(np.zeros(n, np.int8)),
@@ -221,26 +222,6 @@ def ground_under(xyz, sensor):
     near = z[z < low + 1.0]
     counts = np.bincount(((near - near.min()) / 0.1).astype(np.int64))
     return float(near.min() + (np.argmax(counts) + 0.5) * 0.1)
-
-
-def _numbered(roots, min_size, max_size):
-    """Segment of each point from the union-find roots (-1: none): the
-    trees within the size range, numbered in the order of their first
-    point."""
-    labels = np.full(len(roots), -1, dtype=np.int64)
-    kept = np.flatnonzero(roots >= 0)
-    if not len(kept):
-        return labels
-    sizes = np.bincount(roots[kept], minlength=len(roots))
-    ok = sizes >= min_size
-    if max_size is not None:
-        ok &= sizes <= max_size
-    # roots are the lowest index of their tree: in the order of first points
-    first = np.flatnonzero(ok)
-    number = np.full(len(roots), -1, dtype=np.int64)
-    number[first] = np.arange(len(first))
-    labels[kept] = number[roots[kept]]
-    return labels
 
 
 class SweepSegmenter:
