@@ -11,17 +11,20 @@ For each sweep, in one process, warm (every kernel compiled and the model
 loaded before the first timed sweep), each time the best of ``--repeat`` runs:
 
 - ``range image``: :class:`skpcd.segmentation.SweepSegmenter` (one thread: its
-  kernels are sequential), rays from the origin of the file (the sensor for
-  SemanticKITTI, nuScenes and the KITTI sweeps of real_mobile; not for PandaSet,
-  whose files are in world or vehicle coordinates: a ``range image, sensor given``
-  row gives PandaSet of real_labelled the sensor 1.7 m above the origin, where its
-  README puts the optical centre);
+  kernels are sequential; one a sensor), rays from the origin of the file (the
+  sensor for SemanticKITTI, nuScenes and the KITTI sweeps of real_mobile; not for
+  PandaSet, whose files are in world or vehicle coordinates: a ``range image,
+  sensor given`` row gives PandaSet of real_labelled the sensor 1.7 m above the
+  origin, where its README puts the optical centre; a ``range image, theta 3,
+  gap 2`` row joins with a smaller angle and a longer gap than the defaults);
 - ``3-D path``: ``segment_scene(points)`` with its defaults (scan kind, CSF and
   the bases pass, DBSCAN in sweep coordinates, structures), ``n_jobs=1`` and
   ``n_jobs=-1``;
 - ``Open3D``: its largest plane as ground (``segment_plane``, 0.2 m, 1000
   iterations) and ``cluster_dbscan(eps, min_points=5)`` on the rest, eps the one
-  of the 3-D path (all threads: Open3D's own).
+  of the 3-D path (all threads: Open3D's own); ``Open3D cluster_dbscan, every
+  point``: its DBSCAN alone on the whole sweep, ground included, with that eps
+  (times only).
 
 Quality columns: ground precision and recall against the ground classes of the
 truth (road, parking, sidewalk, other-ground, lane marking, terrain); per-point
@@ -72,6 +75,11 @@ SOURCES = {
 # 0.35 m above the road; its README puts the optical centre about 2 m above it.
 PANDASET_SENSOR = (0.0, 0.0, 1.7)
 SENSOR_RATE = 10.0
+RANGE_JOINED = "range image, theta 3, gap 2"
+OPEN3D_ALL = "Open3D cluster_dbscan, every point"
+METHODS = ["range image", "range image, sensor given", RANGE_JOINED,
+           "3-D path (1 thread)", "3-D path (all threads)", "Open3D",
+           OPEN3D_ALL]  # fmt: skip
 # Objects of real_labelled (SemanticKITTI's instances) scored when this big.
 MIN_OBJECT_POINTS = 50
 
@@ -123,6 +131,14 @@ def open3d_segments(xyz, eps):
     labels = np.full(len(xyz), -1, dtype=np.int64)
     labels[~ground] = lab
     return labels, ground
+
+
+def open3d_dbscan(xyz, eps):
+    """Open3D's DBSCAN on every point of the sweep, ground included (as a
+    user who runs cluster_dbscan on a sweep): labels."""
+    o3d = import_open3d()
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz))
+    return np.asarray(pcd.cluster_dbscan(eps=eps, min_points=5), dtype=np.int64)
 
 
 def point_classes(model, xyz, seg):
@@ -201,7 +217,7 @@ def run(args):
 
     from skpcd.classification import load_street_model
     from skpcd.io import read_class_map
-    from skpcd.segmentation import SweepSegmenter, segment_scene
+    from skpcd.segmentation import SweepSegmenter, segment_scene, segment_sweep
 
     model = load_street_model()
     maps = {s: read_class_map(MAPS / m) for s, (_, m) in SOURCES.items()}
@@ -212,9 +228,17 @@ def run(args):
         "pandaset": ["ground", "building", "vegetation", "car", "person",
                      "traffic_sign"],
     }  # fmt: skip
-    plain = SweepSegmenter()
+    # one SweepSegmenter a sensor, as a stream of its sweeps would have (it
+    # keeps the columns of the image found on the sensor's first sweep)
+    per_sensor = {}
+
+    def range_image_of(source):
+        return per_sensor.setdefault(source, SweepSegmenter()).segment
+
+    joined = {"theta": 3.0, "max_gap": 2.0}  # a smaller angle, a longer gap
     segmenters = {
-        "range image": lambda xyz: plain.segment(xyz),
+        "range image": lambda xyz: SweepSegmenter().segment(xyz),
+        RANGE_JOINED: lambda xyz: segment_sweep(xyz, **joined),
         "3-D path (1 thread)": lambda xyz: segment_scene(xyz, n_jobs=1),
         "3-D path (all threads)": lambda xyz: segment_scene(xyz, n_jobs=-1),
     }
@@ -234,7 +258,7 @@ def run(args):
         objects = instance_objects(np.asarray(f.instance))
         row = {"set": "real_labelled", "source": source, "sweep": name,
                "points": len(xyz)}  # fmt: skip
-        methods = dict(segmenters)
+        methods = {**segmenters, "range image": range_image_of(source)}
         if source == "pandaset":
             given = SweepSegmenter(sensor=PANDASET_SENSOR)
             methods["range image, sensor given"] = given.segment
@@ -263,9 +287,11 @@ def run(args):
         }
         if objects:
             row["Open3D"].update(objects_score(labels, objects))
+        labels, secs = best_of(args.repeat, lambda: open3d_dbscan(xyz, eps3))
+        row[OPEN3D_ALL] = {"seconds": secs, "segments": int(labels.max()) + 1}
         row["identify, streamed"] = {
             key: identify_stream(model, path, xyz, func, out_dir)
-            for key, func in (("range image", segmenters["range image"]),
+            for key, func in (("range image", methods["range image"]),
                               ("3-D path", segmenters["3-D path (all threads)"]))
         }  # fmt: skip
         rows.append(row)
@@ -275,7 +301,8 @@ def run(args):
             break
         row = {"set": "real_mobile", "source": name.split("_")[0], "sweep": name,
                "points": len(xyz)}  # fmt: skip
-        for key, func in segmenters.items():
+        methods = {**segmenters, "range image": range_image_of(row["source"])}
+        for key, func in methods.items():
             seg, secs = best_of(args.repeat, lambda: func(xyz))
             row[key] = {"seconds": secs, **objects_score(seg.labels, objects)}
         eps3 = segment_scene(xyz).eps
@@ -330,13 +357,89 @@ def cli_stream(source, files, method, out_dir):
 
 
 def mean(rows, key, field):
-    """Mean of ``row[key][field]`` over the rows that have it."""
-    values = [r[key][field] for r in rows if key in r and r[key].get(field) is not None]
-    return float(np.mean(values)) if values else float("nan")
+    """Mean of ``row[key][field]`` over the rows that have it, a number (an
+    object score is NaN on a sweep that kept none of its objects); None if
+    none has."""
+    values = [r[key].get(field) for r in rows if key in r]
+    values = [v for v in values if v is not None and np.isfinite(v)]
+    return float(np.mean(values)) if values else None
 
 
-def text_report(rows, prov):
+QUALITY = ("ground_precision", "ground_recall", "miou", "kept", "whole", "purity")
+
+
+def summarize(rows):
+    """The means the report and the Performance page show: per source and
+    method on real_labelled, per source on real_mobile, the streamed stages
+    and the commands."""
     budget = 1 / SENSOR_RATE
+    out = {
+        "sensor_rate": SENSOR_RATE,
+        "real_labelled": {},
+        "real_mobile": {},
+        "streamed": {},
+        "command": [
+            {**r, "sweeps_per_s": 1 / r["seconds"]} for r in rows if r["set"] == "cli"
+        ],
+    }
+    for source, (label, _) in SOURCES.items():
+        mine = [
+            r for r in rows if r["set"] == "real_labelled" and r["source"] == source
+        ]
+        if not mine:
+            continue
+        o3d = mean(mine, "Open3D", "seconds")
+        o3d_all = mean(mine, OPEN3D_ALL, "seconds")
+        out["real_labelled"][source] = {
+            "sensor": label,
+            "sweeps": len(mine),
+            "points": float(np.mean([r["points"] for r in mine])),
+            "methods": {
+                m: {
+                    "seconds": mean(mine, m, "seconds"),
+                    "x_open3d": o3d / mean(mine, m, "seconds"),
+                    "x_open3d_every_point": o3d_all / mean(mine, m, "seconds"),
+                    **{k: mean(mine, m, k) for k in QUALITY},
+                }
+                for m in METHODS
+                if any(m in r for r in mine)
+            },
+        }
+        streamed = {}
+        for m in ("range image", "3-D path"):
+            stages = {
+                k: float(np.mean([r["identify, streamed"][m][k] for r in mine]))
+                for k in ("segment", "classify", "write")
+            }
+            total = sum(stages.values())
+            worst = max(stages, key=stages.get)
+            streamed[m] = {**stages, "total": total, "sweeps_per_s": 1 / total,
+                           "held_back_by": None if total <= budget else worst,
+                           "over_s": max(total - budget, 0.0)}  # fmt: skip
+        out["streamed"][source] = streamed
+    for source in ("kitti", "pandaset"):
+        part = [r for r in rows if r["set"] == "real_mobile" and r["source"] == source]
+        if part:
+            out["real_mobile"][source] = {
+                "sweeps": len(part),
+                "methods": {
+                    m: {
+                        k: mean(part, m, k)
+                        for k in ("seconds", "kept", "whole", "purity")
+                    }
+                    for m in METHODS
+                    if any(m in r for r in part)
+                },
+            }
+    return out
+
+
+def _cell(value, width, digits=3):
+    return f"{'-':>{width}s}" if value is None else f"{value:{width}.{digits}f}"
+
+
+def text_report(summary, prov):
+    budget = 1 / summary["sensor_rate"]
     lines = [
         "Single sweeps: segmentation in the range image, the 3-D path and Open3D",
         f"commit {prov['commit']}; {prov['machine']}; {prov['date']}",
@@ -348,88 +451,56 @@ def text_report(rows, prov):
         "real_labelled (per-point truth): segmentation time, ground, mIoU of the",
         "shipped model on the segments; objects (SemanticKITTI's instances of 50",
         "points or more) kept, whole, purity",
+        "(xOpen3D: Open3D's time over the method's; xDBSCAN: that of Open3D's",
+        "cluster_dbscan on every point)",
+        f"{'source':15s} {'method':34s} {'s/sweep':>7s} {'xOpen3D':>7s} "
+        f"{'xDBSCAN':>7s} {'grndP':>5s} {'grndR':>5s} {'mIoU':>5s} {'kept':>5s} "
+        f"{'whole':>5s} {'pure':>5s}",
     ]
-    methods = ["range image", "range image, sensor given", "3-D path (1 thread)",
-               "3-D path (all threads)", "Open3D"]  # fmt: skip
-    lines.append(
-        f"{'source':15s} {'method':26s} {'s/sweep':>7s} {'xOpen3D':>7s} "
-        f"{'grndP':>5s} {'grndR':>5s} {'mIoU':>5s} {'kept':>5s} {'whole':>5s} "
-        f"{'pure':>5s}"
-    )
-    for source, (label, _) in SOURCES.items():
-        mine = [
-            r for r in rows if r["set"] == "real_labelled" and r["source"] == source
-        ]
-        if not mine:
-            continue
-        o3d = mean(mine, "Open3D", "seconds")
-        for m in methods:
-            if not any(m in r for r in mine):
-                continue
-            secs = mean(mine, m, "seconds")
-            cells = [
-                f"{mean(mine, m, k):5.3f}"
-                for k in ("ground_precision", "ground_recall", "miou", "kept",
-                          "whole", "purity")
-            ]  # fmt: skip
+    for block in summary["real_labelled"].values():
+        for m, v in block["methods"].items():
             lines.append(
-                f"{label[:15]:15s} {m:26s} {secs:7.4f} {o3d / secs:7.1f} "
-                + " ".join(c.replace("nan", "  -") for c in cells)
+                f"{block['sensor'][:15]:15s} {m:34s} {v['seconds']:7.4f} "
+                f"{v['x_open3d']:7.1f} {v['x_open3d_every_point']:7.1f} "
+                + " ".join(_cell(v[k], 5) for k in QUALITY)
             )
-        points = np.mean([r["points"] for r in mine])
-        lines.append(f"{'':15s} ({len(mine)} sweeps, {points:.0f} points a sweep)")
+        lines.append(
+            f"{'':15s} ({block['sweeps']} sweeps, {block['points']:.0f} points a sweep)"
+        )
     lines += [
         "",
         "real_mobile (boxed objects): kept, whole, purity (means over the sweeps)",
-        f"{'method':27s} {'s/sweep':>8s} {'kept':>6s} {'whole':>6s} {'purity':>6s}",
+        f"{'method':34s} {'s/sweep':>8s} {'kept':>6s} {'whole':>6s} {'purity':>6s}",
     ]
-    mine = [r for r in rows if r["set"] == "real_mobile"]
-    for source in ("kitti", "pandaset"):
-        part = [r for r in mine if r["source"] == source]
-        if not part:
-            continue
-        lines.append(f"{source} ({len(part)} sweeps)")
-        for m in methods:
-            if not any(m in r for r in part):
-                continue
+    for source, block in summary["real_mobile"].items():
+        lines.append(f"{source} ({block['sweeps']} sweeps)")
+        for m, v in block["methods"].items():
             lines.append(
-                f"  {m:25s} {mean(part, m, 'seconds'):8.4f} "
-                f"{mean(part, m, 'kept'):6.3f} {mean(part, m, 'whole'):6.3f} "
-                f"{mean(part, m, 'purity'):6.3f}"
+                f"  {m:32s} {v['seconds']:8.4f} "
+                + " ".join(_cell(v[k], 6) for k in ("kept", "whole", "purity"))
             )
     lines += [
         "",
         "whole identification, streamed (model loaded once): seconds a sweep by",
-        f"stage; the sensor's rate ({SENSOR_RATE:.0f} sweeps/s) leaves "
+        f"stage; the sensor's rate ({summary['sensor_rate']:.0f} sweeps/s) leaves "
         f"{budget:.3f} s a sweep",
         f"{'source':15s} {'segmentation':12s} {'segment':>8s} {'classify':>8s} "
         f"{'write':>8s} {'total':>8s} {'sweeps/s':>8s}  held back by",
     ]
-    for source, (label, _) in SOURCES.items():
-        part = [
-            r for r in rows if r["set"] == "real_labelled" and r["source"] == source
-        ]
-        if not part:
-            continue
-        for m in ("range image", "3-D path"):
-            stages = {
-                k: float(np.mean([r["identify, streamed"][m][k] for r in part]))
-                for k in ("segment", "classify", "write")
-            }
-            total = sum(stages.values())
-            worst = max(stages, key=stages.get)
+    for source, block in summary["streamed"].items():
+        label = summary["real_labelled"][source]["sensor"]
+        for m, v in block.items():
+            held = v["held_back_by"]
             held = (
                 "-"
-                if total <= budget
-                else f"{worst} ({stages[worst]:.3f} s; {total - budget:+.3f} s over)"
+                if held is None
+                else (f"{held} ({v[held]:.3f} s; {v['over_s']:.3f} s over)")
             )
             lines.append(
-                f"{label[:15]:15s} {m:12s} {stages['segment']:8.4f} "
-                f"{stages['classify']:8.4f} {stages['write']:8.4f} {total:8.4f} "
-                f"{1 / total:8.2f}  {held}"
+                f"{label[:15]:15s} {m:12s} {v['segment']:8.4f} {v['classify']:8.4f} "
+                f"{v['write']:8.4f} {v['total']:8.4f} {v['sweeps_per_s']:8.2f}  {held}"
             )
-    cli = [r for r in rows if r["set"] == "cli"]
-    if cli:
+    if summary["command"]:
         lines += [
             "",
             "skpcd identify FOLDER -o OUT (one command: start-up and the model",
@@ -439,12 +510,12 @@ def text_report(rows, prov):
             f"{'source':15s} {'--method':12s} {'sweeps':>6s} {'1 sweep':>8s} "
             f"{'all':>8s} {'s/sweep':>8s} {'sweeps/s':>8s}",
         ]
-        for r in cli:
+        for r in summary["command"]:
             lines.append(
                 f"{SOURCES[r['source']][0][:15]:15s} {r['method']:12s} "
                 f"{r['sweeps']:6d} {r['one_sweep_seconds']:8.2f} "
                 f"{r['command_seconds']:8.2f} {r['seconds']:8.4f} "
-                f"{1 / r['seconds']:8.2f}"
+                f"{r['sweeps_per_s']:8.2f}"
             )
     return "\n".join(lines) + "\n"
 
@@ -454,11 +525,25 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="2 sweeps a source")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--out", default=str(HERE / "results" / "sweeps.json"))
+    ap.add_argument(
+        "--summarize",
+        action="store_true",
+        help="no run: summarize the rows of the --out file again (its commit, "
+        "machine and date kept)",
+    )
     args = ap.parse_args(argv)
-    rows = run(args)
-    prov = provenance()
-    text = text_report(rows, prov)
-    write_results(Path(args.out), {**prov, "rows": rows}, text)
+    if args.summarize:
+        import json
+
+        old = json.loads(Path(args.out).read_text())
+        rows = old["rows"]
+        prov = {k: old[k] for k in ("commit", "machine", "date")}
+    else:
+        rows = run(args)
+        prov = provenance()
+    summary = summarize(rows)
+    text = text_report(summary, prov)
+    write_results(Path(args.out), {**prov, "summary": summary, "rows": rows}, text)
     print(text)
 
 

@@ -651,6 +651,89 @@ def _scene_labels(data):
     return header, rows, provenance(data)
 
 
+def _maybe(value, digits):
+    """A figure, or an empty cell where the file holds none (null)."""
+    return Text("") if value is None else num(value, digits)
+
+
+def _sweeps(data):
+    rows = []
+    for _, block in data["summary"]["real_labelled"].items():
+        for method, r in block["methods"].items():
+            rows.append(
+                [
+                    Text(block["sensor"]),
+                    Text(method),
+                    num(r["seconds"], 3),
+                    num(r["x_open3d"], 1),
+                    num(r["x_open3d_every_point"], 1),
+                    *(
+                        _maybe(r[k], 3)
+                        for k in ("ground_precision", "ground_recall", "miou",
+                                  "kept", "whole", "purity")
+                    ),
+                ]
+            )  # fmt: skip
+    for source, block in data["summary"]["real_mobile"].items():
+        for method, r in block["methods"].items():
+            rows.append(
+                [
+                    Text(f"real_mobile {source}"),
+                    Text(method),
+                    num(r["seconds"], 3),
+                    Text(""),
+                    Text(""),
+                    Text(""),
+                    Text(""),
+                    Text(""),
+                    *(_maybe(r[k], 3) for k in ("kept", "whole", "purity")),
+                ]
+            )
+    header = [
+        "sweeps (sensor)", "segmentation", "s per sweep", "x Open3D",
+        "x Open3D cluster_dbscan",
+        "ground precision", "ground recall", "mIoU", "objects kept", "whole",
+        "purity",
+    ]  # fmt: skip
+    return header, rows, provenance(data)
+
+
+def _sweeps_streamed(data):
+    rows = []
+    summary = data["summary"]
+    for source, block in summary["streamed"].items():
+        sensor = summary["real_labelled"][source]["sensor"]
+        for method, r in block.items():
+            held = r["held_back_by"]
+            rows.append(
+                [
+                    Text(sensor),
+                    Text(method),
+                    *(num(r[k], 3) for k in ("segment", "classify", "write", "total")),
+                    num(r["sweeps_per_s"], 1),
+                    Text("-") if held is None else Text(held),
+                ]
+            )
+    for r in summary["command"]:
+        rows.append(
+            [
+                Text(summary["real_labelled"][r["source"]]["sensor"]),
+                Text(f"skpcd identify --method {r['method']}"),
+                Text(""),
+                Text(""),
+                Text(""),
+                num(r["seconds"], 3),
+                num(r["sweeps_per_s"], 1),
+                Text(""),
+            ]
+        )
+    header = [
+        "sweeps (sensor)", "segmentation", "segment, s", "classify, s", "write, s",
+        "total, s", "sweeps per s", "held back by",
+    ]  # fmt: skip
+    return header, rows, provenance(data)
+
+
 @dataclass(frozen=True)
 class Table:
     """One table of the page: the result file and the function reading it."""
@@ -795,6 +878,26 @@ TABLES = {
         "The review page (skpcd review) of simulated street segments, predicted "
         "by the shipped model, opened from file:// in a fresh headless Chromium "
         "each load: first contentful paint.",
+    ),
+    "sweeps": Table(
+        "sweeps.json",
+        _sweeps,
+        "Single real sweeps, warm, in one process, best of three runs (mean over "
+        "the sweeps): the segmentation in the range image (one thread), the 3-D "
+        "path of segment_scene (one thread and all) and Open3D (its plane and "
+        "cluster_dbscan on the rest with the 3-D path's eps, its threads; its "
+        "cluster_dbscan alone on every point); x: Open3D's time over the "
+        "method's; quality beside the times.",
+    ),
+    "sweeps_streamed": Table(
+        "sweeps.json",
+        _sweeps_streamed,
+        "Whole identification of a sweep, streamed with the model loaded once: "
+        "each stage (segment, classify every segment with the shipped model, "
+        "write the labelled LAZ), and the stage that keeps it from the sensor's "
+        "10 sweeps a second; then skpcd identify over a folder of the sweeps, "
+        "seconds of each sweep after the first (start-up and model loading "
+        "excluded).",
     ),
     "sim_to_real": Table(
         "sim_to_real.json",
