@@ -23,7 +23,6 @@ import json
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +32,7 @@ sys.path.insert(0, str(ROOT))
 
 from bench_threads import dales  # noqa: E402
 from measure import (  # noqa: E402
+    best_of,
     commit,
     maxrss_mb,
     reset_peak,
@@ -43,11 +43,7 @@ K = 10
 
 def _best(call, repeat):
     call()  # warm-up: kernels loaded, pages of the pools touched
-    best = np.inf
-    for _ in range(repeat):
-        t = time.perf_counter()
-        out = call()
-        best = min(best, time.perf_counter() - t)
+    out, best = best_of(repeat, call)
     return best, out
 
 

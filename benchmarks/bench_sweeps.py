@@ -60,7 +60,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from bench_scan_kinds import objects_score, real_mobile  # noqa: E402
-from measure import import_open3d, provenance, write_results  # noqa: E402
+from measure import best_of, import_open3d, provenance, write_results  # noqa: E402
 
 SHARED = HERE.parent.parent / "shared" / "data"
 LABELLED = Path(os.environ.get("SKPCD_REAL_LABELLED_DIR", SHARED / "real_labelled"))
@@ -107,16 +107,6 @@ def instance_objects(instance, min_points=MIN_OBJECT_POINTS):
         for k, (a, b) in enumerate(pairwise(bounds))
         if ids[k] != 0 and counts[k] >= min_points
     ]
-
-
-def best_of(repeat, func):
-    """``(result, seconds)``: the last result and the fastest of ``repeat`` runs."""
-    best, out = np.inf, None
-    for _ in range(repeat):
-        t = time.perf_counter()
-        out = func()
-        best = min(best, time.perf_counter() - t)
-    return out, best
 
 
 def open3d_segments(xyz, eps):

@@ -1,5 +1,6 @@
 """What the benchmark scripts share: where and when a run happened (commit,
-machine, load) and how much memory a call took at its peak (Linux).
+machine, load), the best time of a few runs, and how much memory a call took at
+its peak (Linux).
 
 Each script records :func:`commit` and :func:`machine` in its results file, so
 that the Performance page can say where each figure came from.
@@ -12,11 +13,15 @@ import platform
 import resource
 import subprocess
 import sys
+import time
 from pathlib import Path
+
+import numpy as np
 
 HERE = Path(__file__).resolve().parent
 
 __all__ = [
+    "best_of",
     "commit",
     "cpu_model",
     "import_open3d",
@@ -140,6 +145,16 @@ def provenance():
         "machine": machine(),
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
     }
+
+
+def best_of(repeat, func):
+    """``(result, seconds)``: the last result and the fastest of ``repeat`` runs."""
+    best, out = np.inf, None
+    for _ in range(repeat):
+        t = time.perf_counter()
+        out = func()
+        best = min(best, time.perf_counter() - t)
+    return out, best
 
 
 def write_results(out, results, text):
