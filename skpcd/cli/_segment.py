@@ -218,15 +218,15 @@ def segment_file(args, command, fields=None):
 
         ground = ClassifiedGround(args.ground_codes)
     if tiled:
-        points, extras, source = None, {}, args.scene
+        points, extras, source, rings = None, {}, args.scene, None
     else:
         want = "all" if fields or args.ground == "from-file" else None
         with stage(f"reading {Path(args.scene).name}"):
             points, extras, rings = _read_scene(args, want)
         finite = np.isfinite(points).all(axis=1)
         source = points if finite.all() else points[finite]
-        if rings and finite.all():  # segment_scene reads them from the file
-            source = args.scene
+        if rings is not None:
+            rings = rings[finite]
         if args.ground == "from-file":  # the flags of the points read
             ground = ground.flags_of(args.scene, extras)[finite]
             extras = extras if fields else {}
@@ -239,6 +239,7 @@ def segment_file(args, command, fields=None):
             source,
             ground=ground,
             sensor=args.sensor,
+            rings=rings,
             method=args.method,
             eps=args.eps,
             eps_scale=args.eps_scale,
@@ -306,20 +307,19 @@ def check_method(args, command):
 
 def _read_scene(args, want):
     """``(points, extras, rings)`` of SCENE, non-finite points kept;
-    ``rings``: with --method range-image, whether the file has a field of
-    rings (as segment_scene reads them: at least 4 values)."""
+    ``rings``: with --method range-image, the ring of each point when the
+    file has them (see :func:`~skpcd.segmentation._scene.rings_of`), else
+    None."""
     from skpcd.io._api import read_fields
-    from skpcd.segmentation._scene import RING_FIELDS
+    from skpcd.segmentation._scene import RING_FIELDS, rings_of
 
     if args.method != "range-image":
         read = read_fields(args.scene, want, nonfinite="keep")
-        return (*(read if want else (read, {})), False)
+        return (*(read if want else (read, {})), None)
     points, extras = read_fields(
         args.scene, want, nonfinite="keep", optional=[RING_FIELDS]
     )
-    rings = [extras[n] for n in RING_FIELDS if n in extras][:1]
-    rings = bool(rings) and len(np.unique(rings[0])) >= 4
-    return points, extras if want else {}, rings
+    return points, extras if want else {}, rings_of(extras)
 
 
 def _finite(value):

@@ -116,6 +116,8 @@ def range_image(points, *, sensor=None, rings=None, n_columns=None):
     azimuth = np.mod(np.arctan2(d[:, 1], d[:, 0]), 2 * np.pi)
     if rings is not None:
         rings = np.asarray(rings).ravel()
+        if rings.shape != (len(xyz),):
+            raise ValueError(f"rings has {rings.size} values for {len(xyz)} points")
         values, inverse = np.unique(rings, return_inverse=True)
         median = np.array(
             [np.median(elevation[inverse == k]) for k in range(len(values))]

@@ -51,6 +51,7 @@ __all__ = ["segment_scene"]
             None,
         ],
         "sensor": ["array-like", None],
+        "rings": ["array-like", None],
         "method": [StrOptions({"dbscan", "euclidean", "range-image"})],
         "eps": [Interval(Real, 0, None, closed="neither"), None],
         "eps_scale": [Interval(Real, 0, None, closed="neither")],
@@ -78,6 +79,7 @@ def segment_scene(
     *,
     ground="auto",
     sensor=None,
+    rings=None,
     method="dbscan",
     eps=None,
     eps_scale=EPS_SCALE,
@@ -135,6 +137,11 @@ def segment_scene(
         With ``ground="auto"``, the position of the sensor of a single
         sweep if known (see :func:`describe_scan`); with
         ``method="range-image"``, where the rays start (None: the origin).
+    rings : array-like of shape (n_points,) or None, default=None
+        With ``method="range-image"``, the ring of each point (see
+        :func:`range_image`); None takes them from a file's ring field
+        (``RING_FIELDS``, when it holds at least 4 values), else finds them
+        from the elevation angles.
     method : {"dbscan", "euclidean", "range-image"}, default="dbscan"
         :class:`AutoEpsDBSCAN` (eps estimated from the non-ground points
         unless given), :class:`EuclideanClusters` (every point core; eps
@@ -352,6 +359,8 @@ def segment_scene(
     ['object', 'object']
     """
     _check_options(denoise, tile_size, structures)
+    if rings is not None and method != "range-image":
+        raise ValueError("rings are used by method='range-image' only")
     if method == "range-image" and tile_size is not None:
         raise ValueError(
             "method='range-image' segments one sweep in memory; it is not "
@@ -376,11 +385,12 @@ def segment_scene(
         )  # fmt: skip
         return seg._replace(eps=seg.eps / unit, unit=unit)
     from_file = classified_ground(ground, points)
-    given = rings = None
+    given = None
     if from_file is not None:
         points, given = from_file.read(points)
     elif isinstance(points, (str, os.PathLike)) and method == "range-image":
-        points, rings = read_rings(points)
+        points, found = read_rings(points)
+        rings = found if rings is None else rings
     elif isinstance(points, (str, os.PathLike)):
         points = read_point_cloud(points)
     xyz = check_scene(points)
@@ -447,13 +457,20 @@ RING_FIELDS = ("ring", "scanner_channel", "laser_number", "laser_id", "channel")
 
 
 def read_rings(path):
-    """The points of a file and the ring of each, from the first of
-    ``RING_FIELDS`` it has with at least 4 values (None otherwise)."""
+    """The points of a file and the ring of each (see :func:`rings_of`)."""
     xyz, extras = read_fields(path, optional=[RING_FIELDS])
-    rings = next(iter(extras.values()), None)
-    if rings is not None and len(np.unique(rings)) < 4:
-        rings = None  # a LAS 1.4 file's scanner_channel, all 0
-    return xyz, rings
+    return xyz, rings_of(extras)
+
+
+def rings_of(fields):
+    """The ring of each point: the first of ``RING_FIELDS`` among the
+    ``fields`` read from a file that holds at least 4 values (a LAS 1.4
+    file's scanner_channel, all 0, or a scanner's few channels are not
+    rings); None if none does."""
+    rings = next((fields[n] for n in RING_FIELDS if n in fields), None)
+    if rings is None or len(np.unique(rings)) < 4:
+        return None
+    return np.asarray(rings)
 
 
 def _segment_in_image(xyz, ground, given, sensor, rings, clustering):

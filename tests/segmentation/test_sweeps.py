@@ -219,6 +219,10 @@ def test_segment_scene_method_range_image(sweep, tmp_path):
     assert (seg.labels[-2:] == -1).all() and not seg.ground[-2:].any()
     with pytest.raises(ValueError, match="not available with tile_size"):
         segment_scene(points, method="range-image", tile_size=50.0)
+    with pytest.raises(ValueError, match="by method='range-image' only"):
+        segment_scene(points, rings=np.zeros(len(points)))
+    with pytest.raises(ValueError, match=f"rings has 3 values for {len(points)}"):
+        segment_scene(points, method="range-image", rings=[1, 2, 3])
 
 
 def test_the_same_labels_on_any_number_of_threads(sweep):
@@ -255,6 +259,11 @@ def test_rings_read_from_a_file(sweep, tmp_path):
     np.testing.assert_array_equal(found, rings)
     seg = segment_scene(path, method="range-image", min_cluster_size=20)
     assert seg.n_segments == 2
+    # the rings of the file, or those given, are the rows of the image
+    rows = np.full(len(points), 5)
+    rows[::2] = 7  # two rings only: a different image, other segments
+    other = segment_scene(path, method="range-image", rings=rows, min_cluster_size=20)
+    assert other.n_segments != 2 or not np.array_equal(other.labels, seg.labels)
 
 
 def _core(source):
