@@ -3,6 +3,8 @@
 import numpy as np
 
 from skpcd.classification._case_based import CaseBasedClassifier
+from skpcd.classification._reject import RejectUnknown
+from skpcd.classification._unknown import best_or_unknown
 
 __all__ = ["predict_with_confidence"]
 
@@ -51,10 +53,16 @@ def predict_with_confidence(model, X):
         final, Xt = model, X
     if isinstance(final, CaseBasedClassifier):
         return final.predict(Xt), "similarity", final.class_similarity(Xt).max(axis=1)
-    pred = np.asarray(final.predict(Xt))
-    if not hasattr(final, "predict_proba"):
-        return pred, None, None
-    proba = final.predict_proba(Xt)
+    if isinstance(final, RejectUnknown):  # its answer is read from proba: once
+        proba = final.predict_proba(Xt)
+        pred = best_or_unknown(
+            proba, final.classes_, final.threshold, final.unknown_label_
+        )
+    elif not hasattr(final, "predict_proba"):
+        return np.asarray(final.predict(Xt)), None, None
+    else:
+        pred = np.asarray(final.predict(Xt))
+        proba = final.predict_proba(Xt)
     column = {c: j for j, c in enumerate(final.classes_)}
     cols = np.array([column.get(p, -1) for p in pred], dtype=np.int64)
     rows = np.arange(len(pred))

@@ -85,6 +85,22 @@ def test_default_pipeline_with_unknown_and_its_confidence():
     assert set(pred) <= {*labels[keep], "unknown"}
 
 
+def test_the_confidence_of_a_rejecting_model_takes_one_prediction(monkeypatch):
+    # the forest's probabilities, the costliest step of identify on a sweep,
+    # are computed once for the answer and its confidence
+    model = RejectUnknown(_forest(), threshold=0.9).fit(X, list("aaabbb"))
+    calls = []
+    real = RejectUnknown.predict_proba
+    monkeypatch.setattr(
+        RejectUnknown, "predict_proba", lambda self, X: calls.append(1) or real(self, X)
+    )
+    pred, kind, score = predict_with_confidence(model, X)
+    assert len(calls) == 1
+    np.testing.assert_array_equal(pred, model.predict(X))
+    assert kind == "probability"
+    assert ((pred == "unknown") == (score < 0.9)).all()
+
+
 def test_cli_predict_writes_unknown(tmp_path, capsys):
     from skpcd.cli import main
     from skpcd.io import save_model, write_point_cloud
