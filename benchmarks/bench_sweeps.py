@@ -16,7 +16,8 @@ loaded before the first timed sweep), each time the best of ``--repeat`` runs:
   PandaSet, whose files are in world or vehicle coordinates: a ``range image,
   sensor given`` row gives PandaSet of real_labelled the sensor 1.7 m above the
   origin, where its README puts the optical centre; a ``range image, theta 3,
-  gap 2`` row joins with a smaller angle and a longer gap than the defaults);
+  gap 2`` row joins with a smaller angle and a longer gap than the defaults,
+  a ``range image, structures`` row runs the structures step on all threads);
 - ``3-D path``: ``segment_scene(points)`` with its defaults (scan kind, CSF and
   the bases pass, DBSCAN in sweep coordinates, structures), ``n_jobs=1`` and
   ``n_jobs=-1``;
@@ -76,10 +77,11 @@ SOURCES = {
 PANDASET_SENSOR = (0.0, 0.0, 1.7)
 SENSOR_RATE = 10.0
 RANGE_JOINED = "range image, theta 3, gap 2"
+RANGE_STRUCTURES = "range image, structures"
 OPEN3D_ALL = "Open3D cluster_dbscan, every point"
 METHODS = ["range image", "range image, sensor given", RANGE_JOINED,
-           "3-D path (1 thread)", "3-D path (all threads)", "Open3D",
-           OPEN3D_ALL]  # fmt: skip
+           RANGE_STRUCTURES, "3-D path (1 thread)", "3-D path (all threads)",
+           "Open3D", OPEN3D_ALL]  # fmt: skip
 # Objects of real_labelled (SemanticKITTI's instances) scored when this big.
 MIN_OBJECT_POINTS = 50
 
@@ -229,6 +231,7 @@ def run(args):
     segmenters = {
         "range image": lambda xyz: SweepSegmenter().segment(xyz),
         RANGE_JOINED: lambda xyz: segment_sweep(xyz, **joined),
+        RANGE_STRUCTURES: lambda xyz: segment_sweep(xyz, structures=True, n_jobs=-1),
         "3-D path (1 thread)": lambda xyz: segment_scene(xyz, n_jobs=1),
         "3-D path (all threads)": lambda xyz: segment_scene(xyz, n_jobs=-1),
     }
@@ -302,7 +305,7 @@ def run(args):
         progress(row)
     for source in SOURCES:
         files = [path for s, _, path in labelled if s == source]
-        for method in ("range-image", "dbscan"):
+        for method in ("range-image --no-structures", "range-image", "dbscan"):
             rows.append(cli_stream(source, files, method, out_dir))
             progress(rows[-1])
     return rows
@@ -332,8 +335,8 @@ def cli_stream(source, files, method, out_dir):
             if not link.exists():
                 link.symlink_to(path)
         cmd = [sys.executable, "-m", "skpcd", "identify", str(folder), "-o",
-               str(out_dir / f"cli_{name}_{method}"), "--quiet", "--overwrite",
-               "--method", method]  # fmt: skip
+               str(out_dir / f"cli_{name}_{method.replace(' ', '')}"), "--quiet",
+               "--overwrite", "--method", *method.split()]  # fmt: skip
         t = time.perf_counter()
         subprocess.run(cmd, check=True)
         return time.perf_counter() - t
@@ -497,12 +500,12 @@ def text_report(summary, prov):
             "loaded once, then each sweep segmented, classified and written):",
             "seconds of the command on the first sweep alone, on all, and of",
             "each sweep after the first",
-            f"{'source':15s} {'--method':12s} {'sweeps':>6s} {'1 sweep':>8s} "
+            f"{'source':15s} {'--method':28s} {'sweeps':>6s} {'1 sweep':>8s} "
             f"{'all':>8s} {'s/sweep':>8s} {'sweeps/s':>8s}",
         ]
         for r in summary["command"]:
             lines.append(
-                f"{SOURCES[r['source']][0][:15]:15s} {r['method']:12s} "
+                f"{SOURCES[r['source']][0][:15]:15s} {r['method']:28s} "
                 f"{r['sweeps']:6d} {r['one_sweep_seconds']:8.2f} "
                 f"{r['command_seconds']:8.2f} {r['seconds']:8.4f} "
                 f"{r['sweeps_per_s']:8.2f}"

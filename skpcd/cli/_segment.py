@@ -69,12 +69,11 @@ def add_segmentation_options(p):
         "EuclideanClusters, eps 0.2 unless --eps; range-image: one sweep of a "
         "spinning sensor cut in its range image (rings by azimuth columns; "
         "the rings of a ring or scanner_channel field when the file has one), "
-        "fast (tens of ms a sweep): with --ground auto the ground is walked "
-        "along the image's columns, and neighbouring pixels are joined by the "
-        "angle between them; the sweep must be in its sensor's frame, or "
-        "--sensor X Y Z given; --eps, --eps-scale, --min-samples and "
-        "--no-structures do not apply, and --tile-size is refused "
-        "(default dbscan)",
+        "fast, fastest with --no-structures: with --ground auto the ground is "
+        "walked along the image's columns, and neighbouring pixels are joined "
+        "by the angle between them; the sweep must be in its sensor's frame, "
+        "or --sensor X Y Z given; --eps, --eps-scale and --min-samples do not "
+        "apply, and --tile-size is refused (default dbscan)",
     )
     p.add_argument(
         "--eps",

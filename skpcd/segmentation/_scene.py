@@ -149,9 +149,9 @@ def segment_scene(
         sensor's frame (or ``sensor`` given), the segmentation in its range
         image, :func:`segment_sweep` (ground="auto" walks the ground along
         the image's columns; the rings are those of a file's ``ring`` or
-        ``scanner_channel`` field when it has one; ``eps``, ``eps_scale``,
-        ``min_samples`` and ``structures`` do not apply; not with
-        ``tile_size``).
+        ``scanner_channel`` field when it has one; ``structures`` runs the
+        structures step on the image's clusters; ``eps``, ``eps_scale``
+        and ``min_samples`` do not apply; not with ``tile_size``).
     eps : float or None, default=None
         Clustering radius; see ``method``. An automatic radius that joins
         a segment covering more than half of the scene's horizontal
@@ -407,8 +407,9 @@ def segment_scene(
         rings = None if rings is None else rings[keep]
     if method == "range-image":
         seg = _segment_in_image(
-            xyz, ground, (given, from_file), sensor, rings, clustering
-        )
+            xyz, ground, (given, from_file), sensor, rings,
+            {**clustering, "structures": structures},
+        )  # fmt: skip
         return _restored(seg._replace(unit=unit), keep, full)
     scan = None
     if isinstance(ground, str) and ground == "auto":
@@ -489,6 +490,7 @@ def _segment_in_image(xyz, ground, given, sensor, rings, clustering):
         xyz, sensor=sensor, rings=rings, ground=flags,
         min_cluster_size=clustering["min_cluster_size"],
         max_cluster_size=clustering["max_cluster_size"],
+        structures=clustering["structures"], n_jobs=clustering["n_jobs"],
     )  # fmt: skip
     if flags is True:
         return seg

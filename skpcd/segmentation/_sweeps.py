@@ -17,6 +17,8 @@ from skpcd.segmentation._range_image import (
 )
 from skpcd.segmentation._range_kernels import numbered_trees
 from skpcd.segmentation._result import SceneSegmentation, kind_names
+from skpcd.segmentation._scene_clusters import size_filter
+from skpcd.segmentation._structures import segment_structures
 from skpcd.utils._compile import entry_point
 from skpcd.utils._validation import check_scene
 
@@ -68,6 +70,8 @@ _GROUND_NEAR = (3.0, 20.0)
         "min_cluster_size": [Interval(Integral, 1, None, closed="left")],
         "max_cluster_size": [Interval(Integral, 1, None, closed="left"), None],
         "n_columns": [Interval(Integral, 1, None, closed="left"), None],
+        "structures": ["boolean", dict],
+        "n_jobs": [Integral, None],
     },
     prefer_skip_nested_validation=True,
 )
@@ -81,6 +85,8 @@ def segment_sweep(
     min_cluster_size=50,
     max_cluster_size=None,
     n_columns=None,
+    structures=False,
+    n_jobs=None,
     **params,
 ):
     """Cut one sweep of a spinning multi-beam sensor into segments, in its range image.
@@ -125,6 +131,18 @@ def segment_sweep(
         Larger segments are dropped.
     n_columns : int or None, default=None
         Columns of the image (see :func:`range_image`).
+    structures : bool or dict, default=False
+        True runs the structures step of :func:`segment_scene` on the
+        points above the ground (:ref:`structures`): facades and overhead
+        wires taken out as segments of their own, typed ``"facade"`` and
+        ``"wire"``, clusters holding several trunks split, the other points
+        clustered in the image as above; their pieces are linked within
+        ``max_gap / 2``. A dict overrides ``STRUCTURE_DEFAULTS``. It needs a
+        neighbour search in 3-D: several times slower, still much faster
+        than the 3-D path.
+    n_jobs : int or None, default=None
+        Threads of the structures step (None: 1, -1: all cores); the
+        result does not depend on it.
     **params : float
         Overrides of ``SWEEP_DEFAULTS``: ``theta`` (10 degrees),
         ``max_gap`` (1.0 m), ``row_reach`` (3.0 degrees), ``column_reach``
@@ -136,8 +154,9 @@ def segment_sweep(
     -------
     result : SceneSegmentation
         ``labels`` (-1 outside segments), ``ground``, ``kinds`` (every
-        segment an "object"), ``eps`` NaN (no radius), ``ground_filter``
-        "range-image" when the ground was walked.
+        segment an "object" without ``structures``), ``eps`` NaN (no
+        radius), ``ground_filter`` "range-image" when the ground was
+        walked.
 
     See Also
     --------
@@ -173,8 +192,9 @@ def segment_sweep(
     xyz = check_scene(points)
     image = range_image(xyz, sensor=sensor, rings=rings, n_columns=n_columns)
     return _segment_image(
-        xyz, image, ground, min_cluster_size, max_cluster_size, params
-    )
+        xyz, image, ground, min_cluster_size, max_cluster_size, params,
+        structures, n_jobs,
+    )  # fmt: skip
 
 
 def _sweep_params(params):
@@ -187,7 +207,9 @@ def _sweep_params(params):
     return {**SWEEP_DEFAULTS, **params}
 
 
-def _segment_image(xyz, image, ground, min_size, max_size, p):
+def _segment_image(
+    xyz, image, ground, min_size, max_size, p, structures=False, n_jobs=None
+):
     """segment_sweep on a range image already made."""
     if ground is True:
         columns = max(round(p["ground_column_width"] * image.n_columns / 360), 1)
@@ -204,17 +226,48 @@ def _segment_image(xyz, image, ground, min_size, max_size, p):
         if is_ground.shape != (len(xyz),):
             raise ValueError(f"ground has {is_ground.size} flags for {len(xyz)} points")
         name = None
-    roots = image_clusters(
-        xyz, image, ~is_ground, theta=p["theta"], max_gap=p["max_gap"],
-        reach=max(int(np.ceil(p["row_reach"] / image.row_height)), 1),
-        reach_columns=p["column_reach"],
-    )  # fmt: skip
-    labels = numbered_trees(roots, min_size, -1 if max_size is None else max_size)
-    n = int(labels.max()) + 1 if len(labels) else 0
+    join = {
+        "theta": p["theta"], "max_gap": p["max_gap"],
+        "reach": max(int(np.ceil(p["row_reach"] / image.row_height)), 1),
+        "reach_columns": p["column_reach"],
+    }  # fmt: skip
+    if structures is False:
+        roots = image_clusters(xyz, image, ~is_ground, **join)
+        labels = numbered_trees(roots, min_size, -1 if max_size is None else max_size)
+        n = int(labels.max()) + 1 if len(labels) else 0
+        kinds = np.zeros(n, np.int8)
+    else:
+        labels, kinds = _with_structures(
+            xyz, image, is_ground, join, structures, min_size, max_size, n_jobs
+        )
     return SceneSegmentation(
-        labels, is_ground, float("nan"), kind_names(np.zeros(n, np.int8)),
-        None, name,
+        labels, is_ground, float("nan"), kind_names(kinds), None, name
+    )
+
+
+def _with_structures(xyz, image, is_ground, join, structures, min_size, max_size,
+                     n_jobs):  # fmt: skip
+    """Labels and kinds of the points above the ground through the
+    structures step, its clusters made in the image."""
+    rest = np.flatnonzero(~is_ground)
+    labels = np.full(len(xyz), -1, dtype=np.int64)
+    if len(rest) < 3:
+        return labels, np.zeros(0, np.int8)
+
+    def cluster(mask):
+        keep = np.zeros(len(xyz), dtype=bool)
+        keep[rest[mask]] = True
+        roots = image_clusters(xyz, image, keep, **join)
+        return numbered_trees(roots, 1, -1)[rest[mask]]
+
+    sub, kinds, _ = segment_structures(
+        np.ascontiguousarray(xyz[rest]), xyz[is_ground], join["max_gap"] / 2,
+        structures if isinstance(structures, dict) else None, cluster,
+        n_jobs=n_jobs,
     )  # fmt: skip
+    kept = size_filter(sub, len(kinds), min_size, max_size)
+    labels[rest] = kept[sub]
+    return labels, kinds[kept[:-1] >= 0]
 
 
 def ground_under(xyz, sensor):
@@ -251,6 +304,10 @@ class SweepSegmenter:
         Smaller segments are dropped.
     max_cluster_size : int or None, default=None
         Larger segments are dropped.
+    structures : bool or dict, default=False
+        The structures step (see :func:`segment_sweep`).
+    n_jobs : int or None, default=None
+        Threads of the structures step.
     **params : float
         Overrides of ``SWEEP_DEFAULTS`` (see :func:`segment_sweep`).
 
@@ -284,12 +341,14 @@ class SweepSegmenter:
 
     def __init__(
         self, *, sensor=None, n_columns=None, min_cluster_size=50,
-        max_cluster_size=None, **params,
+        max_cluster_size=None, structures=False, n_jobs=None, **params,
     ):  # fmt: skip
         self.sensor = sensor
         self.n_columns = n_columns
         self.min_cluster_size = min_cluster_size
         self.max_cluster_size = max_cluster_size
+        self.structures = structures
+        self.n_jobs = n_jobs
         self.params = _sweep_params(params)
         self.n_columns_ = n_columns
         self.n_sweeps_ = 0
@@ -318,7 +377,7 @@ class SweepSegmenter:
         )
         seg = _segment_image(
             xyz, image, ground, self.min_cluster_size, self.max_cluster_size,
-            self.params,
+            self.params, self.structures, self.n_jobs,
         )  # fmt: skip
         self.n_columns_ = image.n_columns
         self.n_sweeps_ += 1

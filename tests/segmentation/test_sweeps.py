@@ -206,7 +206,9 @@ def test_sweep_segmenter_keeps_its_columns_and_counts_sweeps(sweep):
 
 def test_segment_scene_method_range_image(sweep, tmp_path):
     points = sweep[0]
-    seg = segment_scene(points, method="range-image", min_cluster_size=20)
+    seg = segment_scene(
+        points, method="range-image", min_cluster_size=20, structures=False
+    )
     direct = segment_sweep(points, min_cluster_size=20)
     np.testing.assert_array_equal(seg.labels, direct.labels)
     np.testing.assert_array_equal(seg.ground, direct.ground)
@@ -231,6 +233,27 @@ def test_the_same_labels_on_any_number_of_threads(sweep):
     two = segment_scene(points, method="range-image", n_jobs=2, denoise="radius")
     np.testing.assert_array_equal(one.labels, two.labels)
     np.testing.assert_array_equal(one.ground, two.ground)
+    assert list(one.kinds) == list(two.kinds)
+
+
+def test_the_structures_step_types_a_facade_in_the_image():
+    # a wall 20 m long and 6 m tall behind the boxes
+    points, _, hit = cast_sweep([*BOXES, (14.0, 14.3, -10.0, 10.0, 4.2)])
+    plain = segment_sweep(points, min_cluster_size=20)
+    assert set(plain.kinds) == {"object"}
+    seg = segment_sweep(points, min_cluster_size=20, structures=True)
+    wall = seg.labels[(hit == 2) & ~seg.ground]
+    assert (wall >= 0).mean() > 0.9
+    assert seg.kinds[np.bincount(wall[wall >= 0]).argmax()] == "facade"
+    for k in range(2):  # the boxes stay objects, apart from the wall
+        box = np.unique(seg.labels[(hit == k) & ~seg.ground])
+        assert (box >= 0).all() and {seg.kinds[b] for b in box} == {"object"}
+        assert not np.isin(box, wall).any()
+    scene = segment_scene(points, method="range-image", min_cluster_size=20)
+    np.testing.assert_array_equal(scene.labels, seg.labels)
+    assert list(scene.kinds) == list(seg.kinds)
+    segmenter = SweepSegmenter(min_cluster_size=20, structures=True)
+    np.testing.assert_array_equal(segmenter.segment(points).labels, seg.labels)
 
 
 def test_rings_read_from_a_file(sweep, tmp_path):
@@ -257,12 +280,13 @@ def test_rings_read_from_a_file(sweep, tmp_path):
     las.write(path)
     _, found = read_rings(path)
     np.testing.assert_array_equal(found, rings)
-    seg = segment_scene(path, method="range-image", min_cluster_size=20)
+    flat = {"method": "range-image", "min_cluster_size": 20, "structures": False}
+    seg = segment_scene(path, **flat)
     assert seg.n_segments == 2
     # the rings of the file, or those given, are the rows of the image
     rows = np.full(len(points), 5)
     rows[::2] = 7  # two rings only: a different image, other segments
-    other = segment_scene(path, method="range-image", rings=rows, min_cluster_size=20)
+    other = segment_scene(path, rings=rows, **flat)
     assert other.n_segments != 2 or not np.array_equal(other.labels, seg.labels)
 
 
