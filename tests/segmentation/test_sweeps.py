@@ -371,15 +371,16 @@ def test_the_speed_the_page_promises_is_the_benchmark_s():
     assert kitti["3-D path (1 thread)"]["seconds"] / ri >= 20
     assert kitti["Open3D"]["seconds"] / ri >= 20
     assert kitti["range image"]["x_open3d_every_point"] >= 40
-    # streamed at about the sensor's rate on 32-beam sweeps, in process and
-    # through the command
-    assert summary["streamed"]["nuscenes"]["range image"]["sweeps_per_s"] >= 9
+    # streamed faster than the sensor's rate on 32-beam sweeps, in process
+    # and through the command
+    assert summary["streamed"]["nuscenes"]["range image"]["sweeps_per_s"] > 10
     command = {(r["source"], r["method"]): r["seconds"] for r in summary["command"]}
-    assert 1 / command["nuscenes", "range-image"] >= 9
-    # on 64-beam sweeps the classification and the writing take longer
+    assert 1 / command["nuscenes", "range-image --no-structures"] > 10
+    # on 64-beam sweeps the classification and the writing take longer, and
+    # hold it below the rate
     stages = summary["streamed"]["semantickitti"]["range image"]
     assert stages["classify"] + stages["write"] > stages["segment"]
-    assert stages["held_back_by"] == "classify"
+    assert stages["held_back_by"] == "classify" and stages["sweeps_per_s"] < 10
 
 
 def test_the_quality_the_page_states_is_the_benchmark_s():
@@ -416,6 +417,19 @@ def test_the_quality_the_page_states_is_the_benchmark_s():
     assert (
         pandaset["range image"]["kept"] < 0.5 * pandaset["3-D path (1 thread)"]["kept"]
     )
+    # the structures step: a better mIoU than the image alone, below the 3-D
+    # path's, as pure; several times the image's time, a fraction of the 3-D
+    for block in labelled.values():
+        m = block["methods"]
+        st, ri, d3 = (
+            m["range image, structures"],
+            m["range image"],
+            m["3-D path (1 thread)"],
+        )
+        assert ri["miou"] < st["miou"] < d3["miou"]
+        assert 2 * ri["seconds"] < st["seconds"] < d3["seconds"] / 3
+    st = instances["range image, structures"]
+    assert st["purity"] >= instances["3-D path (1 thread)"]["purity"] - 0.01
     # a smaller angle and a longer gap: better classified on nuScenes and
     # PandaSet, neighbours joined (less pure)
     for source in ("nuscenes", "pandaset"):
