@@ -5,13 +5,10 @@ an interrupt or a bad scene in the middle leaves the scenes done before."""
 
 import csv
 import json
-import os
 import shutil
 import signal
-import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import laspy
@@ -21,6 +18,7 @@ import pytest
 from skpcd.cli import main
 from skpcd.io import read_point_cloud, write_point_cloud
 from skpcd.io._atomic import PARTIAL_MARK
+from tests.cli._started import start_until
 
 REAL_SWEEP = Path("/work/shared/data/real_labelled/scans/semantickitti_07_000964.laz")
 FIELDS = ("segment", "class", "ground", "probability")
@@ -365,19 +363,12 @@ _SCRIPT = textwrap.dedent(
 def test_a_signal_leaves_the_scenes_done_and_nothing_partial(tmp_path, sweeps, how):
     marker, out = tmp_path / "began", tmp_path / "out"
     argv = ["identify", *map(str, sweeps), "-o", str(out), *SWEEP, "--quiet"]
-    proc = subprocess.Popen(
+    proc = start_until(
         [sys.executable, "-c", _SCRIPT, str(marker), *argv],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-        env={**os.environ, "TMPDIR": str(tmp_path)},
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        marker,
+        {"TMPDIR": str(tmp_path)},
+        "the second scene was never written",
     )
-    deadline = time.monotonic() + 120
-    while not marker.exists():
-        assert proc.poll() is None, proc.stderr.read()
-        assert time.monotonic() < deadline, "the second scene was never written"
-        time.sleep(0.01)
     proc.send_signal(how)
     err = proc.communicate(timeout=60)[1].strip().splitlines()
     assert proc.returncode == (130 if how == signal.SIGINT else 143), err

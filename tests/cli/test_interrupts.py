@@ -21,6 +21,7 @@ import pytest
 
 from skpcd.cli import main
 from skpcd.io._atomic import PARTIAL_MARK
+from tests.cli._started import start_until
 
 REAL_SCAN = "/work/shared/data/real_mobile/scans/kitti_object_000000.las"
 # longest time from the signal to the end of the command
@@ -93,22 +94,12 @@ def _interrupt(tmp_path, stage, argv, how, delay):
     marker.unlink(missing_ok=True)
     temp = tmp_path / "temp"
     temp.mkdir(exist_ok=True)
-    env = {**os.environ, "TMPDIR": str(temp)}
-    proc = subprocess.Popen(
+    proc = start_until(
         [sys.executable, "-c", _SCRIPT, str(marker), stage, *map(str, argv)],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-        # as from a terminal: a pytest-xdist worker ignores SIGINT, and a
-        # command started from there would keep ignoring it
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        marker,
+        {"TMPDIR": str(temp)},
+        "the stage never began",
     )
-    deadline = time.monotonic() + 120
-    while not marker.exists():
-        assert proc.poll() is None, proc.stderr.read()
-        assert time.monotonic() < deadline, "the stage never began"
-        time.sleep(0.01)
     time.sleep(delay)
     sent = time.monotonic()
     proc.send_signal(signal.SIGINT if how == "SIGINT" else signal.SIGTERM)
