@@ -9,6 +9,7 @@ import io
 import os
 import signal
 import sys
+import threading
 import warnings
 
 from skpcd.cli._common import CommandError, cli_spelling
@@ -69,6 +70,11 @@ def _small_pages():
     _set_madvise_hugepage(False)
 
 
+# Seconds after which an interrupt that landed where Python ignores
+# exceptions is delivered again.
+_REDELIVER = 0.01
+
+
 def run(command, func, args):
     """Run ``func(args)`` as the command ``command``.
 
@@ -93,11 +99,23 @@ def run(command, func, args):
             Terminated(signum) if signum == signal.SIGTERM else KeyboardInterrupt()
         )
 
+    def on_lost(unraisable):
+        # the interrupt was raised where Python ignores exceptions (a
+        # callback of the import machinery, a finaliser): it would only be
+        # printed, and the run go on; deliver it again a moment later,
+        # when this frame is gone
+        if isinstance(unraisable.exc_value, KeyboardInterrupt) and received:
+            signum = received.pop()
+            threading.Timer(_REDELIVER, os.kill, (os.getpid(), signum)).start()
+            return
+        lost_hook(unraisable)
+
     in_main = _is_main_thread()
-    previous = {}
+    previous, lost_hook = {}, sys.unraisablehook
     if in_main:
         for signum in _catchable():
             previous[signum] = signal.signal(signum, on_signal)
+        sys.unraisablehook = on_lost
     try:
         # numba, tqdm: imported here, not for --help
         from skpcd.utils._compile import compile_notice
@@ -140,6 +158,7 @@ def run(command, func, args):
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+        sys.unraisablehook = lost_hook
 
 
 class _Discard(io.TextIOBase):

@@ -270,6 +270,47 @@ def test_sigterm_inside_the_laz_decoder_is_not_a_corrupt_file(tmp_path, capsys):
     ]
 
 
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupt_where_python_ignores_exceptions_still_ends_the_run(
+    signum, capsys
+):
+    """In one process, deterministically: the signal arrives inside a weakref
+    callback (as inside the import machinery's module locks), where Python
+    prints an exception and goes on; the run still ends, in one line."""
+    import argparse
+    import weakref
+
+    from skpcd.cli._process import run
+
+    class Thing:
+        pass
+
+    def work(args):
+        thing = Thing()
+
+        def callback(ref):
+            os.kill(os.getpid(), signum)
+            time.sleep(0.2)  # the handler runs here, inside the callback
+
+        ref = weakref.ref(thing, callback)
+        del thing  # the callback runs now
+        time.sleep(5)  # the interrupt, delivered again, ends this
+        return 0 if ref is not None else 1
+
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    started = time.monotonic()
+    try:
+        status = run("segment", work, argparse.Namespace(quiet=True))
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    assert time.monotonic() - started < 4
+    assert status == (130 if signum == signal.SIGINT else 143)
+    word = "interrupted" if signum == signal.SIGINT else "terminated"
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"skpcd segment: {word}"), err
+
+
 def test_a_crash_of_the_work_process_is_one_line_and_leaves_nothing(tmp_path, scene):
     """The work dies of a signal it did not expect (as the SIGSEGV seen at
     exit): the command says so in one line and removes the partial output."""
