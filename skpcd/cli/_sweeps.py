@@ -123,17 +123,38 @@ def plan_outputs(args, files, command):
 def run_sweeps(args):
     """identify each scene of ``args.scene`` into the folder ``args.output``."""
     from skpcd.cli._common import load_model_for
-    from skpcd.cli._identify import identify_scene
-    from skpcd.exceptions import PointCloudFileError
-    from skpcd.utils._progress import silenced
 
     command = "identify"
     files = scene_files(args.scene, command)
     plans = plan_outputs(args, files, command)
     model = load_model_for(args, command)
     out = Path(args.output)
+    made = [p for p in (out, *out.parents) if not p.exists()]
     out.mkdir(parents=True, exist_ok=True)
-    start, done = time.perf_counter(), 0
+    start = time.perf_counter()
+    try:
+        done = _identify_each(args, model, plans, out, command)
+    finally:
+        # the folders made for the outputs go again when none was written
+        for folder in made:
+            if folder.is_dir() and not any(folder.iterdir()):
+                folder.rmdir()
+    seconds = time.perf_counter() - start
+    if not args.quiet:
+        print(
+            f"identified {done} scenes in {seconds:.1f} s "
+            f"({done / max(seconds, 1e-9):.1f} sweeps per second) -> {out}"
+        )
+    return 0
+
+
+def _identify_each(args, model, plans, out, command):
+    """identify each planned scene in turn; returns how many were."""
+    from skpcd.cli._identify import identify_scene
+    from skpcd.exceptions import PointCloudFileError
+    from skpcd.utils._progress import silenced
+
+    done = 0
     for scene, target, legend in plans:
         # each scene alone, as identify SCENE -o OUTPUT --quiet would run it
         one = Namespace(**{**vars(args), "scene": str(scene), "quiet": True})
@@ -152,13 +173,7 @@ def run_sweeps(args):
                 f"{time.perf_counter() - began:.3f} s",
                 flush=True,
             )
-    seconds = time.perf_counter() - start
-    if not args.quiet:
-        print(
-            f"identified {done} scenes in {seconds:.1f} s "
-            f"({done / max(seconds, 1e-9):.1f} sweeps per second) -> {out}"
-        )
-    return 0
+    return done
 
 
 def _stopped_at(scene, exc, done, out, command):

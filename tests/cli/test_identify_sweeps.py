@@ -316,6 +316,14 @@ def test_a_bad_scene_stops_there_and_the_outputs_before_it_stay(tmp_path, sweeps
     assert sorted(p.name for p in out.iterdir()) == ["a.las", "a.las.classes.csv"]
 
 
+def test_a_bad_first_scene_leaves_no_output_folder(tmp_path, sweeps):
+    bad = sweeps[0].parent / "0.ply"  # first by name
+    bad.write_bytes(b"ply\nformat binary_little_endian 1.0\nend_header\n")
+    out = tmp_path / "new" / "out"
+    _refused(["identify", str(bad.parent), "-o", str(out), *SWEEP, "--quiet"], "0.ply")
+    assert not (tmp_path / "new").exists()
+
+
 def test_an_interrupt_leaves_the_scenes_done(tmp_path, sweeps, monkeypatch):
     import skpcd.io
 
