@@ -443,3 +443,23 @@ def test_the_quality_the_page_states_is_the_benchmark_s():
             methods["range image, theta 3, gap 2"]["purity"]
             < methods["range image"]["purity"]
         )
+
+
+def test_a_sweep_segmenter_compiles_its_kernels_when_made():
+    # in a fresh process: before it, the kernels of the image have no
+    # compiled version; once it is made, they have
+    import subprocess
+    import sys
+
+    code = (
+        "from skpcd.segmentation import _range_kernels as k, SweepSegmenter\n"
+        "kernels = (k.pixel_order, k.ground_columns, k.cluster_image,"
+        " k.numbered_trees)\n"
+        "assert not any(f.signatures for f in kernels)\n"
+        "SweepSegmenter()\n"
+        "assert all(f.signatures for f in kernels), [f.signatures for f in kernels]\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr
