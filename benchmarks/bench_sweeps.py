@@ -11,13 +11,15 @@ For each sweep, in one process, warm (every kernel compiled and the model
 loaded before the first timed sweep), each time the best of ``--repeat`` runs:
 
 - ``range image``: :class:`skpcd.segmentation.SweepSegmenter` (one thread: its
-  kernels are sequential; one a sensor), rays from the origin of the file (the
-  sensor for SemanticKITTI, nuScenes and the KITTI sweeps of real_mobile; not for
-  PandaSet, whose files are in world or vehicle coordinates: a ``range image,
-  sensor given`` row gives PandaSet of real_labelled the sensor 1.7 m above the
-  origin, where its README puts the optical centre; a ``range image, theta 3,
-  gap 2`` row joins with a smaller angle and a longer gap than the defaults,
-  a ``range image, structures`` row runs the structures step on all threads);
+  kernels are sequential; one a sensor), no sensor given: rays from the origin of
+  the file (the sensor for SemanticKITTI, nuScenes and the KITTI sweeps of
+  real_mobile), or from 1.85 m above the ground under it when the origin is on the
+  road (PandaSet's files, in a frame whose origin is the road under the car); a
+  ``range image, sensor given`` row gives PandaSet of real_labelled the sensor
+  1.7 m above the origin, where its README puts the optical centre; a ``range
+  image, theta 3, gap 2`` row joins with a smaller angle and a longer gap than
+  the defaults, a ``range image, structures`` row runs the structures step on
+  all threads);
 - ``3-D path``: ``segment_scene(points)`` with its defaults (scan kind, CSF and
   the bases pass, DBSCAN in sweep coordinates, structures), ``n_jobs=1`` and
   ``n_jobs=-1``;

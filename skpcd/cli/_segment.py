@@ -52,7 +52,8 @@ def add_segmentation_options(p):
         default=None,
         help="position of the sensor of a single sweep, if known (helps "
         "--ground auto tell a robot from a car; with --method range-image, "
-        "where the rays start, default the origin)",
+        "where the rays start, default the origin, or 1.85 m above the "
+        "ground under it when the origin is on the road)",
     )
     p.add_argument(
         "--no-structures",

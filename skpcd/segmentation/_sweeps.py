@@ -11,6 +11,7 @@ from sklearn.utils._param_validation import (
 )
 
 from skpcd.segmentation._range_image import (
+    ground_under,
     image_clusters,
     image_ground,
     range_image,
@@ -56,9 +57,6 @@ _PARAMS = {
     "ground_max_step": [Interval(Real, 0, None, closed="left")],
     "ground_column_width": [Interval(Real, 0, 360, closed="neither")],
 }
-# Ground under the sensor: the most common height (0.1 m bins) within 1 m
-# above the 5 % lowest of the points 3 to 20 m away horizontally.
-_GROUND_NEAR = (3.0, 20.0)
 
 
 @validate_params(
@@ -115,10 +113,14 @@ def segment_sweep(
     points : array-like of shape (n_points, 3+)
         One sweep; columns beyond the third are ignored.
     sensor : array-like of shape (3,) or None, default=None
-        The sensor's position; None is the origin: the sweep in its
-        sensor's frame, as drivers, KITTI and nuScenes give it. A sweep in
-        another frame (world or vehicle coordinates) needs it: rays from
-        the wrong place mix the rings.
+        The sensor's position; None is the origin when the sweep is in its
+        sensor's frame, as drivers, KITTI and nuScenes give it, and 1.85 m
+        above the ground under the origin when the points seen from the
+        origin do not reach below the horizon as a sensor's lowest beams do
+        (the origin on the road, as in PandaSet's files; see
+        :func:`range_image`). A sweep in another frame (world coordinates, a
+        sensor far from the origin) needs it: rays from the wrong place mix
+        the rings.
     rings : array-like of shape (n_points,) or None, default=None
         The ring of each point (LAS ``scanner_channel``, a ``ring`` field);
         None finds rows from the elevation angles (see :func:`range_image`).
@@ -270,20 +272,6 @@ def _with_structures(xyz, image, is_ground, join, structures, min_size, max_size
     return labels, kinds[kept[:-1] >= 0]
 
 
-def ground_under(xyz, sensor):
-    """Height of the ground under the sensor: the most common height (0.1 m
-    bins) within 1 m above the 5 % lowest points 3 to 20 m away
-    horizontally (all the points when none is)."""
-    rho = np.hypot(xyz[:, 0] - sensor[0], xyz[:, 1] - sensor[1])
-    z = xyz[(rho >= _GROUND_NEAR[0]) & (rho <= _GROUND_NEAR[1]), 2]
-    if len(z) < 10:
-        z = xyz[:, 2]
-    low = np.quantile(z, 0.05)
-    near = z[z < low + 1.0]
-    counts = np.bincount(((near - near.min()) / 0.1).astype(np.int64))
-    return float(near.min() + (np.argmax(counts) + 0.5) * 0.1)
-
-
 class SweepSegmenter:
     """Segment sweep after sweep in their range images, state kept between sweeps.
 
@@ -297,7 +285,9 @@ class SweepSegmenter:
     Parameters
     ----------
     sensor : array-like of shape (3,) or None, default=None
-        The sensor's position in the sweeps' frame; None is the origin.
+        The sensor's position in the sweeps' frame; None is the origin, or
+        1.85 m above the ground under it when the origin is on the road
+        (as :func:`segment_sweep`).
     n_columns : int or None, default=None
         Columns of the image; None takes them from the first sweep.
     min_cluster_size : int, default=50

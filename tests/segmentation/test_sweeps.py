@@ -143,6 +143,24 @@ def test_a_sweep_out_of_its_sensor_frame_needs_the_sensor():
     assert right.ground[hit == -1].mean() > 0.99
 
 
+def test_a_sweep_with_its_origin_on_the_road_gets_the_sensor_above_it():
+    # the same sweep in a vehicle's frame: the origin on the road, 1.8 m
+    # below the sensor (as PandaSet's files)
+    points, _, hit = cast_sweep(sensor=(0.0, 0.0, 1.8))
+    image = range_image(points)
+    assert image.sensor_from == "above the origin"
+    # 1.85 m above the ground found under the origin (the road, at 0)
+    np.testing.assert_allclose(image.sensor, [0.0, 0.0, 1.85], atol=0.06)
+    seg = segment_sweep(points, min_cluster_size=20)
+    assert seg.n_segments == 2
+    assert seg.ground[hit == -1].mean() > 0.99
+    # in its sensor's frame, the origin stays; given, the sensor is taken
+    assert range_image(SWEEP[0]).sensor_from == "origin"
+    given = range_image(points, sensor=(0.0, 0.0, 1.8))
+    assert given.sensor_from == "given"
+    np.testing.assert_array_equal(given.sensor, [0.0, 0.0, 1.8])
+
+
 def test_ground_false_or_given_flags(sweep):
     points, _, hit = sweep
     flat = segment_sweep(points, ground=False, min_cluster_size=20)
@@ -337,6 +355,39 @@ def test_boxed_objects_of_real_kitti_sweeps_kept_and_whole(real_sweeps):
     assert len(scores) >= 3
     assert np.mean([s["kept"] for s in scores]) > 0.9
     assert np.mean([s["purity"] for s in scores]) > 0.9
+
+
+@pytest.mark.parametrize(
+    ("source", "sensor_from"),
+    [("semantickitti", "origin"), ("nuscenes", "origin"),
+     ("pandaset", "above the origin")],
+)  # fmt: skip
+def test_where_the_rays_of_real_sweeps_start(real_labelled, source, sensor_from):
+    # SemanticKITTI and nuScenes sweeps are in their sensor's frame; PandaSet's
+    # files have the origin on the road under the car
+    import laspy
+
+    las = laspy.read(real_labelled(_core(source)))
+    image = range_image(np.column_stack([las.x, las.y, las.z]))
+    assert image.sensor_from == sensor_from
+
+
+def test_boxed_objects_of_real_pandaset_sweeps_kept_without_the_sensor(real_sweeps):
+    # PandaSet's files: the sensor is put above the origin (0.39 of the
+    # objects kept from the origin itself)
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    from bench_scan_kinds import objects_score, real_mobile
+
+    scores = [
+        objects_score(segment_sweep(xyz).labels, objects)
+        for name, xyz, objects, _ in real_mobile()
+        if name.startswith("pandaset")
+    ]
+    assert len(scores) >= 9
+    assert np.mean([s["kept"] for s in scores]) > 0.6
 
 
 # -- what the user guide's page on sweeps promises ---------------------------
