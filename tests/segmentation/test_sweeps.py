@@ -455,8 +455,7 @@ def test_the_quality_the_page_states_is_the_benchmark_s():
     assert nuscenes["range image"]["ground_recall"] == min(
         b["methods"]["range image"]["ground_recall"] for b in labelled.values()
     )
-    # objects: purer segments, fewer of SemanticKITTI's instances kept; few
-    # of PandaSet's boxed objects kept without the sensor
+    # objects: purer segments, fewer of SemanticKITTI's instances kept
     kitti = summary["real_mobile"]["kitti"]["methods"]
     instances = labelled["semantickitti"]["methods"]
     for methods in (kitti, instances):
@@ -464,20 +463,29 @@ def test_the_quality_the_page_states_is_the_benchmark_s():
             methods["range image"]["purity"] > methods["3-D path (1 thread)"]["purity"]
         )
     assert instances["range image"]["kept"] < instances["3-D path (1 thread)"]["kept"]
+    # PandaSet's files, the sensor put above their origin: nearly as many boxed
+    # objects kept as the 3-D path, the mIoU within 0.01 of the sensor given's
     pandaset = summary["real_mobile"]["pandaset"]["methods"]
     assert (
-        pandaset["range image"]["kept"] < 0.5 * pandaset["3-D path (1 thread)"]["kept"]
+        pandaset["range image"]["kept"] > pandaset["3-D path (1 thread)"]["kept"] - 0.05
+    )
+    given = labelled["pandaset"]["methods"]
+    assert (
+        abs(given["range image"]["miou"] - given["range image, sensor given"]["miou"])
+        < 0.01
     )
     # the structures step: a better mIoU than the image alone, below the 3-D
-    # path's, as pure; several times the image's time, a fraction of the 3-D
-    for block in labelled.values():
+    # path's on SemanticKITTI and nuScenes, above on PandaSet; as pure;
+    # several times the image's time, a fraction of the 3-D path's
+    for source, block in labelled.items():
         m = block["methods"]
         st, ri, d3 = (
             m["range image, structures"],
             m["range image"],
             m["3-D path (1 thread)"],
         )
-        assert ri["miou"] < st["miou"] < d3["miou"]
+        assert ri["miou"] < st["miou"]
+        assert (st["miou"] > d3["miou"]) == (source == "pandaset")
         assert 2 * ri["seconds"] < st["seconds"] < d3["seconds"] / 3
     st = instances["range image, structures"]
     assert st["purity"] >= instances["3-D path (1 thread)"]["purity"] - 0.01
