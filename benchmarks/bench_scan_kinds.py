@@ -17,7 +17,18 @@ Data (nothing here is shipped):
 - ``aerial``: the 15 samples of the ISPRS filter test (reference ground per
   point; ``isprs_filter/``) and PDAL's ``autzen_trim.las`` (no object
   truth: the largest segment and eps are shown), in the folder
-  ``SKPCD_EXTRA_REAL`` (default ``../shared/data/extra_real``).
+  ``SKPCD_EXTRA_REAL`` (default ``../extra_real``, beside the checkout; its
+  README names the source of every file).
+- ``kinds`` (``--kinds-only`` measures this alone and adds it to the results
+  already written): the kind found on each real scan of every kind, against
+  the kind it is: the 71 labelled sweeps of ``../shared/data/real_labelled``
+  and the 12 of ``real_mobile`` (spinning), the ISPRS samples and Autzen
+  (airborne), in ``SKPCD_EXTRA_REAL``: ``profiler/`` (RIEGL profiler on the
+  Stereopolis II van in Paris, whole and cut into stretches of 0.1, 0.2 and
+  0.35 s by GPS time; a chunk of Paris-rue-Madame; a Lille street of the
+  NPM3D course) and ``terrestrial/`` (a RIEGL VZ-400i station, an E57 scan of
+  a pump, a TLS pine plot: skpcd has no terrestrial kind); "before" is the
+  rule without the azimuth coverage.
 - ``kept aside``: real labelled sweeps never used to choose anything,
   scored once (``mobile_labelled/``: SemanticKITTI sequence 07, PandaSet
   semantic segmentation, nuScenes lidarseg): ground recall and precision
@@ -64,7 +75,10 @@ from measure import commit, machine  # noqa: E402
 
 SHARED = HERE.parent.parent / "shared" / "data"
 REAL_MOBILE = Path(os.environ.get("SKPCD_REAL_MOBILE", SHARED / "real_mobile"))
-EXTRA = Path(os.environ.get("SKPCD_EXTRA_REAL", SHARED / "extra_real"))
+EXTRA = Path(os.environ.get("SKPCD_EXTRA_REAL", HERE.parent.parent / "extra_real"))
+REAL_LABELLED = Path(
+    os.environ.get("SKPCD_REAL_LABELLED_DIR", SHARED / "real_labelled")
+)
 MIN_SIZE = 50
 BOXED = {10: "car", 30: "person", 81: "sign", 99: "other"}
 METHODS = ("auto", "previous", "smrf mobile", "CSF + sklearn DBSCAN", "Open3D")
@@ -224,6 +238,98 @@ def kept_aside():
                 if len(idx) >= 20:
                     objects.append(idx)
         yield path.stem, xyz, truth, masks, objects
+
+
+def real_scans_of_each_kind():
+    """(name, group, kind it is, xyz) of every real scan at hand; the
+    sweeps are grouped by folder and source."""
+    import laspy
+
+    for path in sorted((REAL_LABELLED / "scans").glob("*.la[sz]")):
+        f = laspy.read(path)
+        xyz = np.column_stack([f.x, f.y, f.z])
+        yield path.stem, f"real_labelled {path.stem.split('_')[0]}", "spinning", xyz
+    for name, xyz, _, _ in real_mobile():
+        yield name, f"real_mobile {name.split('_')[0]}", "spinning", xyz
+    for name, xyz, _ in isprs():
+        yield name, name, "airborne", xyz
+    autzen = EXTRA / "aerial" / "autzen_trim.npz"
+    if autzen.exists():
+        xyz = np.load(autzen)["xyz"] * 0.3048
+        yield "autzen_trim", "autzen_trim", "airborne", xyz
+    for path in sorted((EXTRA / "profiler").glob("*.npz")):
+        z = np.load(path)
+        yield path.stem, path.stem, "profiler", z["xyz"]
+        if "gps_time" in z.files:  # stretches of the line scanner
+            t = z["gps_time"] - z["gps_time"].min()
+            for a, b in ((0.0, 0.1), (0.0, 0.2), (0.3, 0.65)):
+                keep = (t >= a) & (t < b)
+                name = f"{path.stem} {a:g}-{b:g} s"
+                yield name, name, "profiler", z["xyz"][keep]
+    for path in sorted((EXTRA / "terrestrial").iterdir()):
+        if path.suffix == ".npz":
+            xyz = np.load(path)["xyz"]
+        elif path.suffix in (".las", ".laz"):
+            f = laspy.read(path)
+            xyz = np.column_stack([f.x, f.y, f.z])
+        else:
+            continue
+        yield path.stem, path.stem, "terrestrial", xyz
+
+
+def scan_kinds():
+    """The kind found on each real scan, now and with the rule before the
+    azimuth coverage (a concentrated scan was a spinning one)."""
+    from skpcd.segmentation import describe_scan
+
+    rows = []
+    for name, group, truth, xyz in real_scans_of_each_kind():
+        scan = describe_scan(xyz)
+        before = "spinning" if scan.azimuth_coverage is not None else scan.kind
+        rows.append({
+            "scan": name, "group": group, "is": truth, "points": len(xyz),
+            "found": scan.kind, "before": before, "reason": scan.reason,
+            "vertical": scan.vertical, "concentration": scan.concentration,
+            "azimuth_coverage": scan.azimuth_coverage,
+        })  # fmt: skip
+        print(name, truth, scan.kind, flush=True)
+    return {"rows": rows, "date": time.strftime("%Y-%m-%dT%H:%M:%S"),
+            "commit": commit(), "machine": machine()}  # fmt: skip
+
+
+def kinds_lines(kinds):
+    """The table of the kinds found: one row a scan, the 83 real sweeps as
+    one row a source."""
+    lines = [
+        "",
+        "kind found on each real scan (scan_kinds(); "
+        f"{kinds['date']}, commit {kinds['commit']}): now and before the azimuth "
+        "coverage; sweeps grouped by source (ranges over them)",
+        f"{'scan':<44}{'is':>12}{'points':>9}{'found':>10}{'before':>10}"
+        f"{'vertical':>10}{'concentr.':>10}{'azimuth':>9}",
+    ]
+    groups = {}
+    for r in kinds["rows"]:
+        groups.setdefault(r["group"], []).append(r)
+
+    def span(rs, k, fmt):
+        v = [r[k] for r in rs if r[k] is not None]
+        if not v:
+            return "-"
+        lo, hi = min(v), max(v)
+        return f"{lo:{fmt}}" if lo == hi else f"{lo:{fmt}}-{hi:{fmt}}"
+
+    for key, rs in groups.items():
+        found = ",".join(sorted({r["found"] for r in rs}))
+        before = ",".join(sorted({r["before"] for r in rs}))
+        name = f"{key} ({len(rs)})" if len(rs) > 1 else key
+        lines.append(
+            f"{name[:43]:<44}{rs[0]['is']:>12}{span(rs, 'points', 'd'):>9}"
+            f"{found:>10}{before:>10}{span(rs, 'vertical', '.2f'):>10}"
+            f"{span(rs, 'concentration', '.2f'):>10}"
+            f"{span(rs, 'azimuth_coverage', '.2f'):>9}"
+        )
+    return lines
 
 
 def simulated():
@@ -446,6 +552,8 @@ def write(results, out):
                 + "".join(f"{k} {r[k]:.3f}  " for k in keys)
                 + f"kind {r['kind']}"
             )
+    if "kinds" in results:
+        lines += kinds_lines(results["kinds"])
     out.with_suffix(".txt").write_text("\n".join(lines) + "\n")
     out.with_suffix(".json").write_text(json.dumps(results, indent=1))
     print("\n".join(lines))
@@ -455,12 +563,24 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--methods", nargs="*", default=list(METHODS), choices=METHODS)
     p.add_argument("--out", type=Path, default=HERE / "results" / "scan_kinds.json")
+    p.add_argument(
+        "--kinds-only",
+        action="store_true",
+        help="measure only the kind found on each real scan and add it to the "
+        "results already in --out",
+    )
     args = p.parse_args()
+    if args.kinds_only:
+        results = json.loads(args.out.read_text())
+        results["kinds"] = scan_kinds()
+        write(results, args.out)
+        return
     started = commit()  # the code measured, before any later commit
     results = run(args.methods)
     results.update(
         date=time.strftime("%Y-%m-%dT%H:%M:%S"), commit=started, machine=machine()
     )
+    results["kinds"] = scan_kinds()
     write(results, args.out)
 
 
