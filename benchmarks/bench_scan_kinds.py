@@ -305,8 +305,8 @@ def kinds_lines(kinds):
         "kind found on each real scan (scan_kinds(); "
         f"{kinds['date']}, commit {kinds['commit']}): now and before the azimuth "
         "coverage; sweeps grouped by source (ranges over them)",
-        f"{'scan':<44}{'is':>12}{'points':>9}{'found':>10}{'before':>10}"
-        f"{'vertical':>10}{'concentr.':>10}{'azimuth':>9}",
+        f"{'scan':<44}{'is':>12}{'points':>16}{'found':>10}{'before':>10}"
+        f"{'vertical':>11}{'concentr.':>11}{'azimuth':>11}",
     ]
     groups = {}
     for r in kinds["rows"]:
@@ -324,10 +324,10 @@ def kinds_lines(kinds):
         before = ",".join(sorted({r["before"] for r in rs}))
         name = f"{key} ({len(rs)})" if len(rs) > 1 else key
         lines.append(
-            f"{name[:43]:<44}{rs[0]['is']:>12}{span(rs, 'points', 'd'):>9}"
-            f"{found:>10}{before:>10}{span(rs, 'vertical', '.2f'):>10}"
-            f"{span(rs, 'concentration', '.2f'):>10}"
-            f"{span(rs, 'azimuth_coverage', '.2f'):>9}"
+            f"{name[:43]:<44}{rs[0]['is']:>12}{span(rs, 'points', 'd'):>16}"
+            f"{found:>10}{before:>10}{span(rs, 'vertical', '.2f'):>11}"
+            f"{span(rs, 'concentration', '.2f'):>11}"
+            f"{span(rs, 'azimuth_coverage', '.2f'):>11}"
         )
     return lines
 

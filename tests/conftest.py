@@ -48,6 +48,25 @@ def real_sweeps():
     return paths
 
 
+EXTRA_REAL_DIR = Path(os.environ.get("SKPCD_EXTRA_REAL", ROOT.parent / "extra_real"))
+
+
+@pytest.fixture(scope="session")
+def extra_real():
+    """The folder of other real scans beside the checkout (profiler stretches,
+    terrestrial stations, the ISPRS filter-test samples, Autzen; its README
+    names their sources), as a function of a path in it to that path
+    (missing: skipped; their licences do not let them into the repository)."""
+
+    def path(name):
+        p = EXTRA_REAL_DIR / name
+        if not p.exists():
+            pytest.skip(f"no {name} in {EXTRA_REAL_DIR} (set SKPCD_EXTRA_REAL)")
+        return p
+
+    return path
+
+
 REAL_LABELLED_DIR = Path(
     os.environ.get(
         "SKPCD_REAL_LABELLED_DIR", ROOT.parent / "shared" / "data" / "real_labelled"

@@ -260,3 +260,81 @@ def test_tiled_auto_tells_the_kind_from_the_file_and_takes_smrf(tmp_path):
     whole = segment_scene(read_point_cloud(path), ground="aerial", structures=False)
     assert np.array_equal(np.asarray(tiled.labels), whole.labels)
     assert np.array_equal(np.asarray(tiled.ground), whole.ground)
+
+
+# -- the kind of real scans of every kind -------------------------------------
+
+
+def test_every_real_labelled_sweep_is_a_spinning_scan(real_labelled):
+    # 71 sweeps of 32 to 64 beams (SemanticKITTI, nuScenes, PandaSet): their
+    # points near the centre lie all around it (measured 0.78 to 1.00)
+    import laspy
+
+    scans = sorted(real_labelled("").glob("*.la[sz]"))
+    assert len(scans) >= 70
+    for path in scans:
+        f = laspy.read(path)
+        scan = describe_scan(np.column_stack([f.x, f.y, f.z]))
+        assert scan.kind == "spinning", (path.name, scan.summary())
+        assert scan.azimuth_coverage >= 0.7, (path.name, scan.summary())
+
+
+@pytest.mark.parametrize("seconds", [(0.0, 0.1), (0.0, 0.2), (0.3, 0.65), None])
+def test_a_stretch_of_a_real_profiler_is_a_profiler_scan(extra_real, seconds):
+    # a RIEGL line scanner on a van in Paris (Stereopolis II): 150,000 points
+    # over 0.67 s (3.6 m of trajectory), its scan planes across the street;
+    # concentrated around one position (0.11 to 0.30) as a sweep is, but in
+    # two bands of azimuth (measured 0.08 to 0.33 of the sectors)
+    z = np.load(extra_real("profiler/stereopolis_riegl_paris_2013.npz"))
+    xyz = z["xyz"]
+    if seconds is not None:
+        t = z["gps_time"] - z["gps_time"].min()
+        xyz = xyz[(t >= seconds[0]) & (t < seconds[1])]
+    scan = describe_scan(xyz)
+    assert scan.kind == "profiler", scan.summary()
+    assert scan.azimuth_coverage < 0.4
+    # the defaults of a profiler: the street ground, no cap on the radius
+    assert SCAN_KINDS[scan.kind] == {"ground": "street"}
+
+
+@pytest.mark.parametrize(
+    "name", ["ruemadame_28_scoredenoise.npz", "npm3d_lille_street_small.npz"]
+)
+def test_real_mobile_mapping_streets_are_profiler_scans(extra_real, name):
+    scan = describe_scan(np.load(extra_real(f"profiler/{name}"))["xyz"])
+    assert scan.kind == "profiler", scan.summary()
+
+
+def test_the_real_airborne_tiles_are_airborne(extra_real):
+    # the 15 ISPRS filter-test samples and PDAL's Autzen tile
+    samples = sorted(extra_real("isprs_filter").glob("samp*.npz"))
+    assert len(samples) == 15
+    for path in [*samples, extra_real("aerial/autzen_trim.npz")]:
+        scan = describe_scan(np.load(path)["xyz"])
+        assert scan.kind == "airborne", (path.name, scan.summary())
+
+
+def test_the_kinds_the_page_states_are_the_benchmark_s():
+    # benchmarks/results/scan_kinds.json, section "kinds": every real sweep,
+    # airborne tile and profiler scan found as what it is; the profiler's
+    # short stretches were spinning before the azimuth coverage; the
+    # terrestrial stations have no kind of their own
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "results"
+    rows = json.loads((path / "scan_kinds.json").read_text())["kinds"]["rows"]
+    assert {r["is"] for r in rows} == {
+        "spinning", "airborne", "profiler", "terrestrial"
+    }  # fmt: skip
+    for r in rows:
+        if r["is"] != "terrestrial":
+            assert r["found"] == r["is"], r
+    sweeps = [r["azimuth_coverage"] for r in rows if r["is"] == "spinning"]
+    assert len(sweeps) == 83 and 0.78 <= min(sweeps) and max(sweeps) <= 1.0
+    stretches = [r for r in rows if r["before"] != r["found"]]
+    assert stretches and all(
+        r["is"] == "profiler" and r["before"] == "spinning" for r in stretches
+    )
+    assert 0.08 <= min(r["azimuth_coverage"] for r in stretches)
+    assert max(r["azimuth_coverage"] for r in stretches) <= 0.33
+    assert all(r["found"] != "terrestrial" for r in rows)
