@@ -330,11 +330,11 @@ def test_the_kinds_the_page_states_are_the_benchmark_s():
         if r["is"] != "terrestrial":
             assert r["found"] == r["is"], r
     sweeps = [r["azimuth_coverage"] for r in rows if r["is"] == "spinning"]
-    assert len(sweeps) == 83 and 0.78 <= min(sweeps) and max(sweeps) <= 1.0
+    assert len(sweeps) == 83 and 0.77 < min(sweeps) and max(sweeps) <= 1.0
     stretches = [r for r in rows if r["before"] != r["found"]]
     assert stretches and all(
         r["is"] == "profiler" and r["before"] == "spinning" for r in stretches
     )
     assert 0.08 <= min(r["azimuth_coverage"] for r in stretches)
-    assert max(r["azimuth_coverage"] for r in stretches) <= 0.33
+    assert max(r["azimuth_coverage"] for r in stretches) < 0.34
     assert all(r["found"] != "terrestrial" for r in rows)
