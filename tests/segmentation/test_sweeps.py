@@ -340,18 +340,24 @@ def test_ground_of_real_sweeps_in_their_sensor_frame(real_labelled, source):
     assert (seg.labels[car] >= 0).mean() > 0.7
 
 
-def test_boxed_objects_of_real_kitti_sweeps_kept_and_whole(real_sweeps):
+def _boxed_objects_scores(source):
+    """Objects kept, whole and pure by segment_sweep's defaults on the real
+    sweeps of ``source`` in real_mobile (bench_scan_kinds' scores)."""
     import sys
     from pathlib import Path
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
     from bench_scan_kinds import objects_score, real_mobile
 
-    scores = [
+    return [
         objects_score(segment_sweep(xyz).labels, objects)
         for name, xyz, objects, _ in real_mobile()
-        if name.startswith("kitti")
+        if name.startswith(source)
     ]
+
+
+def test_boxed_objects_of_real_kitti_sweeps_kept_and_whole(real_sweeps):
+    scores = _boxed_objects_scores("kitti")
     assert len(scores) >= 3
     assert np.mean([s["kept"] for s in scores]) > 0.9
     assert np.mean([s["purity"] for s in scores]) > 0.9
@@ -375,17 +381,7 @@ def test_where_the_rays_of_real_sweeps_start(real_labelled, source, sensor_from)
 def test_boxed_objects_of_real_pandaset_sweeps_kept_without_the_sensor(real_sweeps):
     # PandaSet's files: the sensor is put above the origin (0.39 of the
     # objects kept from the origin itself)
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-    from bench_scan_kinds import objects_score, real_mobile
-
-    scores = [
-        objects_score(segment_sweep(xyz).labels, objects)
-        for name, xyz, objects, _ in real_mobile()
-        if name.startswith("pandaset")
-    ]
+    scores = _boxed_objects_scores("pandaset")
     assert len(scores) >= 9
     assert np.mean([s["kept"] for s in scores]) > 0.6
 
