@@ -114,14 +114,14 @@ class ScanKind(typing.NamedTuple):
         are the most concentrated, over the distance holding 95 % of them.
     sensor_height : float or None
         Height of the given sensor above the lowest points near it.
-    azimuth_coverage : float or None
-        Fraction of the 72 sectors of 5 degrees of azimuth around ``centre``
-        that hold at least 0.2 % of the points 3 to 20 m from it (measured
-        when the points concentrate around one position; None otherwise).
     centre : tuple of float
         x and y of the position around which the points concentrate (the
         given sensor's when there is one): for a single sweep, about the
         sensor's.
+    azimuth_coverage : float or None
+        Fraction of the 72 sectors of 5 degrees of azimuth around ``centre``
+        that hold at least 0.2 % of the points 3 to 20 m from it (measured
+        when the points concentrate around one position; None otherwise).
     """
 
     kind: str
