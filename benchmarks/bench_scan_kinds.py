@@ -469,6 +469,19 @@ def summary_line(method, per, keys, fmt):
     )
 
 
+def per_scan_lines(per_method, methods, key):
+    """One row a scan: ``key`` for each of ``methods`` (the defaults before
+    and after, scan by scan)."""
+    scans = [
+        k for k in per_method[methods[0]] if key in per_method[methods[0]][k]
+    ]  # fmt: skip
+    lines = [f"  {key + ' by scan':<22}" + "".join(f"{m:>12}" for m in methods)]
+    for scan in scans:
+        values = [per_method[m].get(scan, {}).get(key, float("nan")) for m in methods]
+        lines.append(f"  {scan:<22}" + "".join(f"{v:>12.4f}" for v in values))
+    return lines
+
+
 def write(results, out):
     lines = [
         "segment_scene defaults by kind of scan (benchmarks/bench_scan_kinds.py)",
@@ -490,6 +503,8 @@ def write(results, out):
     ]
     for m, per in results["real_mobile"].items():
         lines.append(summary_line(m, per, keys, ".3f"))
+    lines += per_scan_lines(results["real_mobile"], ("auto", "previous"), "whole")
+    lines += per_scan_lines(results["real_mobile"], ("auto", "previous"), "purity")
     keys = ("ground_error", "ground_recall", "ground_precision")
     lines += ["", "real airborne: ISPRS filter test, 15 samples (mean)"]
     lines.append(
@@ -498,6 +513,7 @@ def write(results, out):
     for m, per in results["aerial"].items():
         samples = {k: v for k, v in per.items() if k.startswith("samp")}
         lines.append(summary_line(m, samples, keys, ".4f"))
+    lines += per_scan_lines(results["aerial"], ("auto", "previous"), "ground_error")
     for m, per in results["aerial"].items():
         if "autzen_trim" in per:
             a = per["autzen_trim"]

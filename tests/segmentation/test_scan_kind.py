@@ -338,3 +338,24 @@ def test_the_kinds_the_page_states_are_the_benchmark_s():
     assert 0.08 <= min(r["azimuth_coverage"] for r in stretches)
     assert max(r["azimuth_coverage"] for r in stretches) < 0.34
     assert all(r["found"] != "terrestrial" for r in rows)
+
+
+def test_the_isprs_errors_of_the_table_are_the_airborne_default_s(extra_real):
+    # the airborne default (SMRF, the "aerial" preset) on the 15 ISPRS
+    # filter-test samples gives the total errors of scan_kinds.txt, sample
+    # by sample (mean 4.5 %: above the 3.5 % aimed at; samp11, steep and
+    # built, 10.5 %)
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "results"
+    table = json.loads((path / "scan_kinds.json").read_text())["aerial"]["auto"]
+    samples = sorted(extra_real("isprs_filter").glob("samp*.npz"))
+    assert len(samples) == 15
+    errors = {}
+    for p in samples:
+        z = np.load(p)
+        ground = GroundFilter(**GROUND_PRESETS["aerial"]).fit_predict(z["xyz"])
+        errors[p.stem] = float((ground != z["ground"].astype(bool)).mean())
+    for name, error in errors.items():
+        assert error == pytest.approx(table[name]["ground_error"], abs=1e-4), name
+    assert np.mean(list(errors.values())) == pytest.approx(0.0453, abs=5e-4)
