@@ -271,6 +271,14 @@ def segment_file(args, command, fields=None):
             f"ground {result.ground_filter!r} (--ground to choose)",
             file=sys.stderr,
         )
+    if result.sensor_from == "above the origin" and not args.quiet:
+        x, y, z = result.sensor
+        print(
+            f"skpcd {command}: the origin of the sweep is on the ground, not at "
+            f"its sensor: rays from ({x:.6g}, {y:.6g}, {z:.6g}), 1.85 m above the "
+            "ground under it (--sensor X Y Z to give it)",
+            file=sys.stderr,
+        )
     if not args.quiet:
         labels = result.labels
         print(
@@ -374,6 +382,8 @@ def _metadata(args, result):
         "scan": None if scan is None else {k: getattr(scan, k) for k in scan._fields},
         "ground": args.ground if result.ground_filter is None else result.ground_filter,
         "method": args.method,
+        "sensor": None if result.sensor is None else list(result.sensor),
+        "sensor_from": result.sensor_from,
         "eps": _finite(result.eps),
         "eps_given": args.eps is not None,
         "unit_metres": result.unit,

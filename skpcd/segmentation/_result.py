@@ -35,6 +35,13 @@ class SceneSegmentation(typing.NamedTuple):
     unit : float
         The length of one coordinate unit in metres (``unit`` of
         :func:`~skpcd.segmentation.segment_scene`, resolved): 0.3048 for a scan in feet.
+    sensor : tuple of float or None
+        Segmented in a range image (:func:`~skpcd.segmentation.segment_sweep`,
+        ``method="range-image"``): the position the rays started from; None
+        otherwise.
+    sensor_from : str or None
+        How that position was chosen: "given", "origin" or "above the
+        origin" (``RangeImage.sensor_from``); None without a range image.
     """
 
     labels: np.ndarray
@@ -44,6 +51,8 @@ class SceneSegmentation(typing.NamedTuple):
     scan: typing.Any = None
     ground_filter: str | None = None
     unit: float = 1.0
+    sensor: tuple | None = None
+    sensor_from: str | None = None
 
     @property
     def n_segments(self):

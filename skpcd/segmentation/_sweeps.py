@@ -243,8 +243,10 @@ def _segment_image(
             xyz, image, is_ground, join, structures, min_size, max_size, n_jobs
         )
     return SceneSegmentation(
-        labels, is_ground, float("nan"), kind_names(kinds), None, name
-    )
+        labels, is_ground, float("nan"), kind_names(kinds), None, name,
+        sensor=tuple(float(v) for v in image.sensor),
+        sensor_from=image.sensor_from,
+    )  # fmt: skip
 
 
 def _with_structures(xyz, image, is_ground, join, structures, min_size, max_size,

@@ -187,6 +187,37 @@ def test_segment_range_image_writes_valid_metadata(tmp_path, sweeps, capsys):
     assert "nan" not in capsys.readouterr().out
 
 
+def test_segment_says_where_the_rays_start(tmp_path, capsys):
+    # the sweep in a vehicle's frame (origin on the road, 1.8 m below the
+    # sensor): said on stderr and in segmentation.json; in its sensor's
+    # frame or with --sensor, nothing said, the choice in the JSON
+    points = _sweep(8.0)[0]
+    scenes = {}
+    for name, shift in (("vehicle", 1.8), ("sensor", 0.0)):
+        scenes[name] = tmp_path / f"{name}.ply"
+        write_point_cloud(scenes[name], points + np.array([0.0, 0.0, shift]))
+    runs = {
+        "vehicle": (scenes["vehicle"], []),
+        "sensor": (scenes["sensor"], []),
+        "given": (scenes["vehicle"], ["--sensor", "0", "0", "1.8"]),
+    }
+    for name, (scene, extra) in runs.items():
+        out = tmp_path / f"segs_{name}"
+        assert main(["segment", str(scene), "-o", str(out), *SWEEP, *extra]) == 0
+        err = capsys.readouterr().err
+        meta = json.loads((out / "segmentation.json").read_text())
+        assert ("the origin of the sweep is on the ground" in err) == (
+            name == "vehicle"
+        )
+        assert meta["n_segments"] == 1
+        if name == "vehicle":
+            assert meta["sensor_from"] == "above the origin"
+            np.testing.assert_allclose(meta["sensor"], [0, 0, 1.85], atol=0.06)
+            assert "--sensor X Y Z" in err
+        else:
+            assert meta["sensor_from"] == ("origin" if name == "sensor" else "given")
+
+
 def test_range_image_reads_the_rings_of_the_file(tmp_path, sweeps):
     from skpcd.segmentation import segment_scene
 
