@@ -24,12 +24,12 @@ from skpcd.cli._inventory import (
     write_inventory_of,
 )
 from skpcd.cli._segment import (
-    add_segmentation_options,
     check_method,
     is_las,
     segment_clouds,
     segment_file,
 )
+from skpcd.cli._segmentation_options import add_segmentation_options
 
 
 def add_parser(sub):

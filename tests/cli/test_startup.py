@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from numba.core import event
 
-from skpcd.cli import _evaluate, _segment
+from skpcd.cli import _evaluate, _segment, _segmentation_options
 from skpcd.cli._process import run
 from skpcd.utils._compile import QUIET_ENV, STAGES
 
@@ -81,8 +81,9 @@ def test_the_check_sees_a_heavy_import():
 def test_ground_choices_are_the_presets():
     from skpcd.segmentation.ground import FROM_FILE, GROUND_PRESETS
 
-    assert set(_segment.GROUND_CHOICES) == {"auto", *GROUND_PRESETS, FROM_FILE, "none"}
-    assert _segment.GROUND_CHOICES[0] == "auto"
+    choices = _segmentation_options.GROUND_CHOICES
+    assert set(choices) == {"auto", *GROUND_PRESETS, FROM_FILE, "none"}
+    assert choices[0] == "auto"
 
 
 def test_segment_formats_are_the_library_s():
