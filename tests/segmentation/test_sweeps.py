@@ -374,8 +374,16 @@ def test_where_the_rays_of_real_sweeps_start(real_labelled, source, sensor_from)
     import laspy
 
     las = laspy.read(real_labelled(_core(source)))
-    image = range_image(np.column_stack([las.x, las.y, las.z]))
+    xyz = np.column_stack([las.x, las.y, las.z])
+    image = range_image(xyz)
     assert image.sensor_from == sensor_from
+    # what the sweeps page says: from the origin, 1 % of the points 23
+    # degrees or more below the horizon in a sensor's frame, under 4 degrees
+    # from PandaSet's origin
+    lowest = np.quantile(
+        np.degrees(np.arctan2(xyz[:, 2], np.hypot(*xyz[:, :2].T))), 0.01
+    )
+    assert (lowest <= -23) if sensor_from == "origin" else (-4 < lowest < 0)
 
 
 def test_boxed_objects_of_real_pandaset_sweeps_kept_without_the_sensor(real_sweeps):
