@@ -23,7 +23,8 @@ Data (nothing here is shipped):
   already written): the kind found on each real scan of every kind, against
   the kind it is: the 71 labelled sweeps of ``../shared/data/real_labelled``
   and the 12 of ``real_mobile`` (spinning), the ISPRS samples and Autzen
-  (airborne), in ``SKPCD_EXTRA_REAL``: ``profiler/`` (RIEGL profiler on the
+  (airborne), in ``SKPCD_EXTRA_REAL``: ``sweeps/`` (single sweeps of other
+  spinning sensors, 16 to 128 beams), ``profiler/`` (RIEGL profiler on the
   Stereopolis II van in Paris, whole and cut into stretches of 0.1, 0.2 and
   0.35 s by GPS time; a chunk of Paris-rue-Madame; a Lille street of the
   NPM3D course) and ``terrestrial/`` (a RIEGL VZ-400i station, an E57 scan of
@@ -251,6 +252,8 @@ def real_scans_of_each_kind():
         yield path.stem, f"real_labelled {path.stem.split('_')[0]}", "spinning", xyz
     for name, xyz, _, _ in real_mobile():
         yield name, f"real_mobile {name.split('_')[0]}", "spinning", xyz
+    for path in sorted((EXTRA / "sweeps").glob("*.npz")):  # 16 to 128 beams
+        yield path.stem, path.stem, "spinning", np.load(path)["xyz"]
     for name, xyz, _ in isprs():
         yield name, name, "airborne", xyz
     autzen = EXTRA / "aerial" / "autzen_trim.npz"

@@ -83,9 +83,14 @@ _MAX_SWEEP_POINTS = 500_000
 # trajectory, also concentrates its points around one position but leaves
 # them in two opposite bands of azimuth: 0.08 to 0.33 on real stretches of
 # 0.1 s to 0.7 s of a RIEGL profiler on a van in Paris (Stereopolis II) and
-# on a chunk of Paris-rue-Madame.
+# on a chunk of Paris-rue-Madame. The coverage tells only when at least a
+# quarter of the points lie 3 to 20 m away (at least 0.32 of them on the
+# real sweeps above, 0.48 to 0.57 on the profiler's stretches): a sweep
+# taken close to its surroundings, on a bench or indoors, has too few there
+# (0.10 to 0.17 on three bench recordings of Hesai and RoboSense sensors).
 _AZIMUTH_SWEEP = 0.6
 _AZIMUTH_NEAR = (3.0, 20.0)
+_AZIMUTH_NEAR_SHARE = 0.25
 _AZIMUTH_SECTORS = 72
 _AZIMUTH_SHARE = 0.002
 # A sensor lower than this above the ground (when given) is on a robot.
@@ -121,7 +126,8 @@ class ScanKind(typing.NamedTuple):
     azimuth_coverage : float or None
         Fraction of the 72 sectors of 5 degrees of azimuth around ``centre``
         that hold at least 0.2 % of the points 3 to 20 m from it (measured
-        when the points concentrate around one position; None otherwise).
+        when the points concentrate around one position and a quarter of
+        them or more lie that far; None otherwise).
     """
 
     kind: str
@@ -170,7 +176,9 @@ def describe_scan(points, *, sensor=None, scan_angle=None, random_state=0):
        those 3 to 20 m from that position lie all around it (at least 60 %
        of the sectors of 5 degrees of azimuth hold 0.2 % of them: a short
        stretch of a profiler leaves them in two bands across the
-       trajectory); else a profiler scan.
+       trajectory; not asked when fewer than a quarter of the points are
+       that far, as in a sweep taken close to its surroundings); else a
+       profiler scan.
 
     The thresholds were measured on real scans (PDAL's and laspy's aerial
     test files, the ISPRS filter-test samples, KITTI and PandaSet sweeps)
@@ -319,11 +327,12 @@ def _concentration(sample, candidates):
 def _azimuth_coverage(sample, centre):
     """Fraction of the sectors of azimuth around ``centre`` holding at least
     ``_AZIMUTH_SHARE`` of the points ``_AZIMUTH_NEAR`` from it horizontally;
-    None when fewer than 100 points are that near."""
+    None when fewer than 100 points, or than ``_AZIMUTH_NEAR_SHARE`` of
+    them, are that near."""
     d = sample[:, :2] - np.asarray(centre, dtype=np.float64)
     r = np.hypot(d[:, 0], d[:, 1])
     near = (r >= _AZIMUTH_NEAR[0]) & (r <= _AZIMUTH_NEAR[1])
-    if near.sum() < 100:
+    if near.sum() < max(100, _AZIMUTH_NEAR_SHARE * len(sample)):
         return None
     azimuth = np.arctan2(d[near, 1], d[near, 0]) + np.pi
     sector = (azimuth * (_AZIMUTH_SECTORS / (2 * np.pi))).astype(np.int64)
